@@ -1,0 +1,99 @@
+"""Plain data for descriptors and the interface every descriptor model implements.
+
+The .npz contract (DESIGN.md): ``stamps`` float64 (n,), ``frames`` int64 (n,),
+``shifts`` int64 (n,), ``descriptors`` float32 (n, d) L2-normalised rows,
+``meta`` a JSON string (descriptor name, parameters).
+"""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Optional
+
+import numpy as np
+
+from ..errors import InputError
+from ..progress import CancelToken, Progress
+
+
+@dataclass
+class Descriptors:
+    stamps: np.ndarray    # float64 (n,)
+    frames: np.ndarray    # int64 (n,) source frame index
+    shifts: np.ndarray    # int64 (n,) columns rolled by the panorama shift (0 without shift)
+    vectors: np.ndarray   # float32 (n, d), rows L2-normalised
+    meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
+
+    def __len__(self) -> int:
+        return int(self.vectors.shape[0])
+
+    def save(self, path: str | Path) -> None:
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(
+            tmp,
+            stamps=np.asarray(self.stamps, np.float64),
+            frames=np.asarray(self.frames, np.int64),
+            shifts=np.asarray(self.shifts, np.int64),
+            descriptors=np.asarray(self.vectors, np.float32),
+            meta=np.array(json.dumps(self.meta)),
+        )
+        tmp.replace(path)  # atomic: a crash never leaves half a file
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Descriptors":
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                missing = {"stamps", "frames", "shifts", "descriptors", "meta"} - set(z.files)
+                if missing:
+                    raise InputError(f"{path}: not a panotopo descriptors file (missing {', '.join(sorted(missing))})")
+                d = cls(
+                    stamps=z["stamps"].astype(np.float64),
+                    frames=z["frames"].astype(np.int64),
+                    shifts=z["shifts"].astype(np.int64),
+                    vectors=z["descriptors"].astype(np.float32),
+                    meta=json.loads(str(z["meta"])),
+                )
+        except InputError:
+            raise
+        except FileNotFoundError:
+            raise InputError(f"{path}: no such file") from None
+        except Exception as exc:  # zip/pickle/json errors all mean the same to a user
+            raise InputError(f"{path}: cannot read descriptors file ({exc.__class__.__name__})") from None
+        n = len(d.stamps)
+        if d.vectors.ndim != 2 or not (len(d.frames) == len(d.shifts) == d.vectors.shape[0] == n):
+            raise InputError(f"{path}: descriptors file has inconsistent array lengths")
+        return d
+
+
+class DescriptorModel(ABC):
+    """A visual place recognition descriptor.
+
+    ``defaults`` holds the calibrated map parameters for this descriptor
+    (at least ``node_sim_th`` and ``loop_sim_th``), used when the user sets none.
+    """
+
+    name: str = ""
+    defaults: dict = {}
+
+    @abstractmethod
+    def describe(
+        self,
+        images: Iterable[np.ndarray],
+        count: int,
+        progress: Optional[Progress] = None,
+        cancel: Optional[CancelToken] = None,
+    ) -> np.ndarray:
+        """Describe ``count`` RGB panoramas (already shifted); returns float32 (count, d), L2-normalised rows.
+
+        ``images`` is a one-pass iterator. Models with a map-specific vocabulary
+        build it from these same images (keeping local features as needed).
+        """
+
+    def settings(self) -> dict:
+        """Everything that changes the output (for the cache key and the .npz meta)."""
+        return {"name": self.name}

@@ -1,0 +1,110 @@
+"""Frames and the one interface every recording reader implements.
+
+A ``FrameSource`` is a recording (video, ROS1/ROS2 bag, folder of images).
+``index`` is always the frame's position in the whole recording (source frame),
+``stamp`` is seconds (from the start for videos and folders, ROS time for bags).
+Sampling at ``interval`` seconds picks, for t_k = first_stamp + k * interval, the
+first frame whose stamp is >= t_k (each source frame at most once).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Optional
+
+import numpy as np
+
+from .errors import InputError
+
+
+@dataclass(frozen=True)
+class Frame:
+    index: int          # source frame index in the recording
+    stamp: float        # seconds
+    rgb: np.ndarray     # H x W x 3 uint8, equirectangular (W == 2 H)
+
+
+def sample_indices(stamps: np.ndarray, interval: float) -> np.ndarray:
+    """Indices of the frames sampled every ``interval`` seconds from ``stamps``.
+
+    For each target time t_k = stamps[0] + k * interval the first frame with
+    stamp >= t_k is taken; a frame is never taken twice (gaps in the recording
+    are skipped, not filled). ``interval <= 0`` keeps every frame.
+    """
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if stamps.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    if interval <= 0:
+        return np.arange(stamps.size, dtype=np.int64)
+    # Tolerance so that 30 fps video sampled at 1.0 s hits frame 30 exactly.
+    eps = 1e-6
+    targets = np.arange(stamps[0], stamps[-1] + eps, interval)
+    idx = np.searchsorted(stamps, targets - eps, side="left")
+    idx = idx[idx < stamps.size]
+    return np.unique(idx).astype(np.int64)
+
+
+def check_equirectangular(rgb: np.ndarray, where: str) -> None:
+    """Raise InputError unless ``rgb`` is an H x 2H x 3 image."""
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise InputError(f"{where}: expected a colour image, got shape {rgb.shape}")
+    h, w = rgb.shape[:2]
+    if w != 2 * h:
+        raise InputError(
+            f"{where}: frame is {w}x{h}, not an equirectangular 2:1 panorama"
+        )
+
+
+class FrameSource(ABC):
+    """A recording: random access for the GUI, sampled iteration for the engine."""
+
+    path: Path
+
+    @property
+    @abstractmethod
+    def frame_count(self) -> int:
+        """Number of frames in the whole recording."""
+
+    @property
+    @abstractmethod
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) of the frames."""
+
+    @abstractmethod
+    def stamps(self) -> np.ndarray:
+        """float64 stamps (seconds) of all ``frame_count`` frames, increasing."""
+
+    @abstractmethod
+    def frame_at(self, index: int) -> Frame:
+        """The source frame ``index`` (0 <= index < frame_count)."""
+
+    @property
+    def duration(self) -> float:
+        s = self.stamps()
+        return float(s[-1] - s[0]) if s.size else 0.0
+
+    def sample_indices(self, interval: float = 1.0) -> np.ndarray:
+        return sample_indices(self.stamps(), interval)
+
+    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+        """Frames sampled every ``interval`` seconds, in order."""
+        for i in self.sample_indices(interval):
+            yield self.frame_at(int(i))
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> "FrameSource":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def open_source(path: str | Path, topic: Optional[str] = None) -> FrameSource:
+    """Open any supported recording; raises InputError with a clear reason."""
+    from .sources import open_recording  # sources import this module
+
+    return open_recording(Path(path), topic=topic)

@@ -1,0 +1,32 @@
+"""Parameters of node creation and loop detection (plain data, shared by CLI, GUI, tests)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Optional
+
+METHODS = ("simple", "shift-simple", "ours")
+# Methods whose descriptors are computed on panorama-shifted frames.
+SHIFTED_METHODS = ("shift-simple", "ours")
+
+
+@dataclass(frozen=True)
+class MapParams:
+    method: str = "ours"
+    node_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
+    loop_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
+    window_size: int = 5
+    count_th: int = 2
+    neighbor_node_num: int = 5
+
+    def resolved(self, defaults: dict) -> "MapParams":
+        """Fill every None from a descriptor's ``defaults``."""
+        filled = {k: defaults[k] for k, v in asdict(self).items() if v is None and k in defaults}
+        return replace(self, **filled)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    @property
+    def uses_shift(self) -> bool:
+        return self.method != "simple"
