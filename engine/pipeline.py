@@ -1,0 +1,135 @@
+"""One run of the method: recording -> descriptors -> nodes -> loops -> TopoMap.
+
+Two plain functions, called the same way by the CLI, the GUI worker and the tests:
+``describe`` is the expensive part (cached on disk); ``build_map`` is cheap and is
+re-run whenever a node or loop parameter changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Iterator, Optional
+
+import numpy as np
+
+from . import descriptors as descriptor_registry
+from .descriptors.base import Descriptors
+from .errors import InputError
+from .frames import open_source
+from .params import MapParams
+from .progress import CancelToken, Progress, check
+
+
+@dataclass(frozen=True)
+class DescribeSettings:
+    descriptor: str = descriptor_registry.DEFAULT_DESCRIPTOR
+    interval: float = 1.0
+    topic: Optional[str] = None
+    shift: bool = True
+    options: dict = field(default_factory=dict)  # passed to the descriptor model
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def is_descriptor_file(path: str | Path) -> bool:
+    return Path(path).suffix.lower() == ".npz"
+
+
+def describe(
+    path: str | Path,
+    settings: DescribeSettings = DescribeSettings(),
+    progress: Optional[Progress] = None,
+    cancel: Optional[CancelToken] = None,
+    cache: "descriptor_registry.cache.DescriptorCache | None" = None,
+) -> Descriptors:
+    """Descriptors of a recording sampled every ``settings.interval`` seconds.
+
+    A descriptors .npz written by ``describe`` is loaded as it is. With ``cache``
+    given, a previous result for the same file and settings is reused.
+    """
+    from .shift import apply_shift, canonical_shift
+    from .descriptors.cache import cache_key
+
+    path = Path(path)
+    if is_descriptor_file(path):
+        return Descriptors.load(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+
+    model = descriptor_registry.get(settings.descriptor, **settings.options)
+    key = None
+    if cache is not None:
+        key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
+                        {"shift": settings.shift, **model.settings()})
+        hit = cache.load(key)
+        if hit is not None:
+            return hit
+
+    with open_source(path, topic=settings.topic) as source:
+        indices = source.sample_indices(settings.interval)
+        if indices.size == 0:
+            raise InputError(f"{path}: the recording has no frames")
+        stamps: list[float] = []
+        frames: list[int] = []
+        shifts: list[int] = []
+
+        def shifted_images() -> Iterator[np.ndarray]:
+            for frame in source.frames(settings.interval):
+                check(cancel)
+                s = canonical_shift(frame.rgb) if settings.shift else 0
+                stamps.append(frame.stamp)
+                frames.append(frame.index)
+                shifts.append(s)
+                yield apply_shift(frame.rgb, s) if s else frame.rgb
+
+        vectors = model.describe(shifted_images(), count=int(indices.size), progress=progress, cancel=cancel)
+
+    meta = {
+        "descriptor": settings.descriptor,
+        "settings": model.settings(),
+        "defaults": dict(model.defaults),
+        "interval": settings.interval,
+        "topic": settings.topic,
+        "shift": settings.shift,
+        "source": str(path),
+    }
+    result = Descriptors(
+        stamps=np.asarray(stamps, np.float64),
+        frames=np.asarray(frames, np.int64),
+        shifts=np.asarray(shifts, np.int64),
+        vectors=np.asarray(vectors, np.float32),
+        meta=meta,
+    )
+    if cache is not None and key is not None:
+        cache.store(key, result)
+    return result
+
+
+def descriptor_defaults(descs: Descriptors) -> dict:
+    """The calibrated thresholds for the descriptor that made ``descs``."""
+    if descs.meta.get("defaults"):
+        return dict(descs.meta["defaults"])
+    name = descs.meta.get("descriptor", descriptor_registry.DEFAULT_DESCRIPTOR)
+    return descriptor_registry.defaults_for(name)
+
+
+def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = ""):
+    """Nodes and loops from descriptors: cheap, re-run on every parameter change."""
+    from .graph import TopoMap
+    from .loops import detect_loops
+    from .nodes import make_nodes
+
+    if len(descs) == 0:
+        raise InputError("no descriptors to map")
+    p = params.resolved(descriptor_defaults(descs))
+    if params.uses_shift != bool(descs.meta.get("shift", True)):
+        wanted = "panorama-shifted" if params.uses_shift else "unshifted"
+        raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
+                         f"{'without' if not params.uses_shift else 'with'} --no-shift")
+    node_rows = make_nodes(descs.vectors, p.node_sim_th)
+    loops = detect_loops(descs.vectors[node_rows], p)
+    extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}
+    return TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
+                         extra_meta=extra)
