@@ -1,0 +1,303 @@
+"""The ``panotopo`` command: map, describe, eval, demo, gui.
+
+Bad input ends with one line on stderr and a non-zero exit status, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Optional, Sequence
+
+from . import __version__
+from .errors import Cancelled, PanotopoError
+from .params import METHODS, MapParams
+
+EXIT_BAD_INPUT = 2
+EXIT_CANCELLED = 130
+
+
+# ----------------------------------------------------------------------------- helpers
+
+class _Bar:
+    """A tqdm progress bar on stderr fed by the engine's (done, total, stage) callback."""
+
+    def __init__(self, quiet: bool):
+        self.quiet = quiet
+        self.bar = None
+        self.stage = None
+
+    def __call__(self, done: int, total: int, stage: str) -> None:
+        if self.quiet:
+            return
+        from tqdm import tqdm
+
+        if self.bar is None or stage != self.stage:
+            self.close()
+            self.bar = tqdm(total=total or None, desc=stage, unit="frame", file=sys.stderr, leave=False)
+            self.stage = stage
+        if total and self.bar.total != total:
+            self.bar.total = total
+        self.bar.n = done
+        self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _descriptor_options(args: argparse.Namespace) -> dict:
+    """Descriptor-specific options given on the command line (only those set)."""
+    names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim")
+    opts = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
+    if getattr(args, "allow_download", False):
+        opts["allow_download"] = True
+    return opts
+
+
+def _cache(args: argparse.Namespace):
+    if getattr(args, "no_cache", False):
+        return None
+    from .descriptors.cache import DescriptorCache
+
+    return DescriptorCache(Path(args.cache_dir) if getattr(args, "cache_dir", None) else None)
+
+
+def _describe(args: argparse.Namespace, shift: bool):
+    from .pipeline import DescribeSettings, describe
+
+    settings = DescribeSettings(
+        descriptor=args.descriptor, interval=args.interval, topic=args.topic,
+        shift=shift, options=_descriptor_options(args),
+    )
+    bar = _Bar(args.quiet)
+    try:
+        return describe(args.input, settings, progress=bar, cache=_cache(args))
+    finally:
+        bar.close()
+
+
+def _map_params(args: argparse.Namespace) -> MapParams:
+    return MapParams(
+        method=args.method, node_sim_th=args.node_sim_th, loop_sim_th=args.loop_sim_th,
+        window_size=args.window_size, count_th=args.count_th, neighbor_node_num=args.neighbor_node_num,
+    )
+
+
+def _load_poses(path: str, topic: Optional[str]):
+    from .sources import read_poses
+
+    return read_poses(Path(path), topic=topic)
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    if not args.quiet:
+        print(text)
+
+
+# ----------------------------------------------------------------------------- commands
+
+def cmd_describe(args: argparse.Namespace) -> int:
+    descs = _describe(args, shift=not args.no_shift)
+    descs.save(args.output)
+    _say(args, f"wrote {args.output}: {len(descs)} descriptors of dimension {descs.vectors.shape[1]}")
+    return 0
+
+
+def cmd_map(args: argparse.Namespace) -> int:
+    from .pipeline import build_map, is_descriptor_file
+
+    params = _map_params(args)
+    descs = _describe(args, shift=params.uses_shift)
+    topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
+    poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    if poses is not None:
+        x, y = poses.at(topomap.stamps())
+        topomap.set_positions(x, y)
+    topomap.write_graphml(args.output)
+    loops = topomap.loops()
+    _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
+               f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
+    if args.plot:
+        from .plots import plot_map
+        evaluation = None
+        if poses is not None:
+            from .evaluate import evaluate
+            evaluation = evaluate(topomap, poses)
+        plot_map(topomap, poses, evaluation, args.plot)
+        _say(args, f"wrote {args.plot}")
+    return 0
+
+
+def _evaluation_dict(ev) -> dict:
+    keys = ("tp", "fp", "tn", "fn", "precision", "recall", "accuracy", "f1")
+    out = {k: getattr(ev, k) for k in keys}
+    for extra in ("events_found", "events_total"):
+        if hasattr(ev, extra):
+            out[extra] = getattr(ev, extra)
+    return out
+
+
+def _evaluation_lines(ev) -> str:
+    d = _evaluation_dict(ev)
+    lines = [f"TP {d['tp']}  FP {d['fp']}  TN {d['tn']}  FN {d['fn']}",
+             f"precision {d['precision']:.3f}  recall {d['recall']:.3f}  "
+             f"accuracy {d['accuracy']:.3f}  F1 {d['f1']:.3f}"]
+    if "events_total" in d:
+        lines.append(f"revisit events found {d['events_found']}/{d['events_total']}")
+    return "\n".join(lines)
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate
+    from .graph import TopoMap
+
+    topomap = TopoMap.read_graphml(args.map)
+    poses = _load_poses(args.poses, args.pose_topic)
+    ev = evaluate(topomap, poses, dist_th=args.dist_th)
+    if args.json:
+        print(json.dumps(_evaluation_dict(ev)))
+    else:
+        print(_evaluation_lines(ev))
+    if args.plot:
+        from .plots import plot_map
+        plot_map(topomap, poses, ev, args.plot)
+    return 0
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate
+    from .pipeline import DescribeSettings, build_map, describe
+    from .plots import plot_map
+    from .synth import make_recording, write_recording
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    _say(args, "rendering the demo route (synthetic 360-degree recording)...")
+    rec = make_recording(route="demo", look=args.look, seed=args.seed)
+    written = write_recording(rec, out)
+    for kind, path in written.items():
+        _say(args, f"  {kind:14s} {path}")
+    bar = _Bar(args.quiet)
+    try:
+        descs = describe(written["video"], DescribeSettings(interval=args.interval), progress=bar, cache=None)
+    finally:
+        bar.close()
+    topomap = build_map(descs, MapParams(), source=str(written["video"]))
+    x, y = rec.poses.at(topomap.stamps())
+    topomap.set_positions(x, y)
+    graphml = out / "demo.graphml"
+    topomap.write_graphml(graphml)
+    ev = evaluate(topomap, rec.poses)
+    plot = out / "demo_map.png"
+    plot_map(topomap, rec.poses, ev, plot)
+    _say(args, f"map: {topomap.node_count} nodes, {len(topomap.loops())} loops (method {topomap.meta.get('method')})")
+    _say(args, _evaluation_lines(ev))
+    _say(args, f"wrote {graphml}\nwrote {plot}")
+    return 0
+
+
+def cmd_gui(args: argparse.Namespace) -> int:
+    from gui.app import run
+
+    return run(args.input, args.screenshot)
+
+
+# ----------------------------------------------------------------------------- parser
+
+def _add_sampling(p: argparse.ArgumentParser) -> None:
+    from .descriptors import DEFAULT_DESCRIPTOR
+
+    p.add_argument("--descriptor", default=DEFAULT_DESCRIPTOR, help="descriptor name (default: %(default)s)")
+    p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
+    p.add_argument("--topic", help="image topic of a ROS bag (needed when it has several)")
+    g = p.add_argument_group("descriptor options")
+    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth)")
+    g.add_argument("--allow-download", action="store_true", help="let torch hub download missing weights")
+    g.add_argument("--vocabulary", help="VLAD vocabulary: 'map' (build from the recording), a c_centers.pt file or a domain name")
+    g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg)")
+    g.add_argument("--layer", type=int, help="AnyLoc feature layer")
+    g.add_argument("--facet", choices=("value", "key", "query", "token"), help="AnyLoc facet")
+    g.add_argument("--device", help="auto, cpu, cuda or mps")
+    g.add_argument("--batch-size", type=int)
+    g.add_argument("--input-height", type=int, help="descriptor input height in pixels (width = 2 x height)")
+    g.add_argument("--pca-dim", type=int, help="project descriptors to this dimension (AnyLoc)")
+    p.add_argument("--no-cache", action="store_true", help="do not read or write the descriptor cache")
+    p.add_argument("--cache-dir", help="descriptor cache folder (default: $PANOTOPO_CACHE or ~/.cache/panotopo)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="panotopo", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"panotopo {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("map", help="build a topological map (GraphML) from a recording")
+    p.add_argument("input", help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz")
+    p.add_argument("-o", "--output", required=True, help="output .graphml")
+    p.add_argument("--method", default="ours", choices=METHODS, help="loop detection method (default: %(default)s)")
+    _add_sampling(p)
+    p.add_argument("--node-sim-th", type=float, help="node similarity threshold (default: the descriptor's)")
+    p.add_argument("--loop-sim-th", type=float, help="loop similarity threshold (default: the descriptor's)")
+    p.add_argument("--window-size", type=int, default=5)
+    p.add_argument("--count-th", type=int, default=2)
+    p.add_argument("--neighbor-node-num", type=int, default=MapParams().neighbor_node_num)
+    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
+    p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
+    p.add_argument("--plot", help="also write a PNG of the map")
+    p.set_defaults(func=cmd_map)
+
+    p = sub.add_parser("describe", help="compute descriptors and save them as .npz")
+    p.add_argument("input")
+    p.add_argument("-o", "--output", required=True, help="output .npz")
+    p.add_argument("--no-shift", action="store_true", help="do not apply the panorama shift")
+    _add_sampling(p)
+    p.set_defaults(func=cmd_describe)
+
+    p = sub.add_parser("eval", help="evaluate a map against ground-truth poses (the paper's metrics)")
+    p.add_argument("map", help="a .graphml written by panotopo")
+    p.add_argument("--poses", required=True, help="CSV t,x,y[,yaw] on the map's clock, or a bag")
+    p.add_argument("--pose-topic", help="pose topic in a bag")
+    p.add_argument("--dist-th", type=float, default=1.0, help="same-place distance in metres (default: 1.0)")
+    p.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    p.add_argument("--plot", help="also write a PNG of the evaluated map")
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("demo", help="generate a synthetic recording, map it and evaluate it (offline)")
+    p.add_argument("--out", default="panotopo-demo", help="output folder (default: %(default)s)")
+    p.add_argument("--look", default="indoor", choices=("indoor", "outdoor"))
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--interval", type=float, default=1.0)
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("gui", help="open the desktop app")
+    p.add_argument("input", nargs="?", help="a recording, a descriptors .npz or a session file")
+    p.add_argument("--screenshot", help="load INPUT, run the engine, save a picture of the window and exit")
+    p.set_defaults(func=cmd_gui)
+    return parser
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except Cancelled:
+        print("panotopo: cancelled", file=sys.stderr)
+        return EXIT_CANCELLED
+    except KeyboardInterrupt:
+        print("panotopo: interrupted", file=sys.stderr)
+        return EXIT_CANCELLED
+    except PanotopoError as exc:
+        print(f"panotopo: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:  # e.g. an output folder that cannot be written
+        print(f"panotopo: error: {exc.filename or ''}: {exc.strerror or exc}".replace(": : ", ": "), file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+if __name__ == "__main__":
+    sys.exit(main())
