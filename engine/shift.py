@@ -1,0 +1,185 @@
+"""Panorama shift (METHOD.md section 1) and circular alignment of panoramas.
+
+A horizontal roll of an equirectangular image is a yaw rotation of the camera
+that loses nothing. ``canonical_shift`` picks the column with the highest
+structure score and rolls it to the left edge, so the same place seen from
+another heading gives (nearly) the same image. ``relative_yaw`` estimates the
+heading between two panoramas by circular cross-correlation of column signatures.
+
+Conventions (all in one place):
+- ``apply_shift(rgb, s)`` rolls the image LEFT by ``s`` columns: ``np.roll(rgb, -s, axis=1)``.
+- ``relative_yaw(a, b)`` returns ``yaw_deg`` in (-180, 180]: how far (in degrees,
+  positive = towards increasing column) the content of ``a`` appears displaced in ``b``.
+  Hence ``apply_shift(b, yaw_to_columns(yaw_deg, W))`` aligns ``b`` with ``a``, and for
+  ``b = np.roll(a, -k, axis=1)`` (``a`` rolled left by ``k``), ``yaw_deg == -k * 360 / W``.
+- With canonical shifts ``s_a``, ``s_b`` of ``a``, ``b`` and the shifted images ``a'``, ``b'``:
+  ``relative_yaw(a, b) == relative_yaw(a', b') + shift_to_yaw_deg(s_b - s_a, W)`` (mod 360).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .errors import InputError
+
+# Width at which column scores are computed (the returned shift is full resolution).
+PROFILE_WIDTH = 256
+# Width at which column signatures are correlated for relative yaw (~0.7 deg per column).
+YAW_WIDTH = 512
+# Rows used for scoring: a band around the horizon. The poles are stretched by the
+# projection and the bottom holds the robot's own body, which turns with the camera
+# and would pin the canonical column to the robot.
+BAND = (0.15, 0.75)
+# Circular smoothing of the column profile, as a fraction of the width (sigma):
+# a wide peak (a tree group, a doorway) wins over one thin high-contrast column,
+# which keeps the argmax stable against noise and moving people.
+SMOOTH_SIGMA = 0.02
+# Horizontal bands of the yaw signature.
+YAW_BANDS = 8
+
+
+def _check_rgb(rgb: np.ndarray) -> None:
+    if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[1] < 2:
+        shape = getattr(rgb, "shape", None)
+        raise InputError(f"panorama shift needs an H x W x 3 image, got shape {shape}")
+
+
+def _downscale(rgb: np.ndarray, width: int) -> np.ndarray:
+    """Float32 RGB at ``min(width, W)`` columns, keeping the 2:1-or-whatever aspect."""
+    h, w = rgb.shape[:2]
+    if w <= width:
+        return rgb.astype(np.float32)
+    new_h = max(2, int(round(h * width / w)))
+    # INTER_AREA averages whole pixel blocks: no aliasing and no border effects that
+    # would make the result depend on where the seam is.
+    return cv2.resize(rgb, (width, new_h), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
+def _band(img: np.ndarray) -> np.ndarray:
+    h = img.shape[0]
+    top, bottom = int(round(BAND[0] * h)), max(int(round(BAND[1] * h)), int(round(BAND[0] * h)) + 1)
+    return img[top:bottom]
+
+
+def _gradient_magnitude(grey: np.ndarray) -> np.ndarray:
+    """Central differences, circular in x (the panorama wraps), clamped in y."""
+    gx = 0.5 * (np.roll(grey, -1, axis=1) - np.roll(grey, 1, axis=1))
+    gy = np.gradient(grey, axis=0)
+    return np.sqrt(gx * gx + gy * gy)
+
+
+def _smooth_circular(x: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing along the last axis with wrap-around (via FFT)."""
+    n = x.shape[-1]
+    if sigma <= 0:
+        return x
+    freqs = np.fft.rfftfreq(n)
+    kernel = np.exp(-2.0 * (np.pi * freqs * sigma) ** 2)  # FT of a unit-area Gaussian
+    return np.fft.irfft(np.fft.rfft(x, axis=-1) * kernel, n=n, axis=-1)
+
+
+def column_profile(rgb: np.ndarray, width: int = PROFILE_WIDTH) -> np.ndarray:
+    """Per-column structure score (float64, ``min(width, W)`` columns) of a panorama.
+
+    Gradient energy of the brightness-normalised grey image in the horizon band,
+    averaged per column, circularly smoothed and divided by its mean (so a global
+    gain or offset in brightness leaves it unchanged).
+    """
+    _check_rgb(rgb)
+    small = _downscale(rgb, width)
+    grey = small @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+    grey = grey / max(float(grey.mean()), 1e-6)   # gain invariance (gradients remove offset)
+    energy = _gradient_magnitude(_band(grey)).mean(axis=0).astype(np.float64)
+    n = energy.size
+    profile = _smooth_circular(energy, SMOOTH_SIGMA * n)
+    mean = profile.mean()
+    return profile / mean if mean > 1e-12 else np.zeros_like(profile)
+
+
+def _peak_subsample(values: np.ndarray, i: int) -> float:
+    """Sub-sample position of the peak at ``i`` by a parabola through its neighbours (circular)."""
+    n = values.size
+    left, mid, right = values[(i - 1) % n], values[i], values[(i + 1) % n]
+    denom = left - 2.0 * mid + right
+    if denom >= 0:  # flat or not a maximum
+        return float(i)
+    return float(i) + float(np.clip(0.5 * (left - right) / denom, -0.5, 0.5))
+
+
+def canonical_shift(rgb: np.ndarray) -> int:
+    """Columns ``s`` in [0, W) to roll LEFT so the highest-scoring column becomes column 0."""
+    profile = column_profile(rgb)
+    n = profile.size
+    w = rgb.shape[1]
+    if not np.any(profile > 0):
+        return 0  # a featureless image has no canonical column
+    peak = _peak_subsample(profile, int(np.argmax(profile)))
+    # Column i of the reduced image covers full columns [i*w/n, (i+1)*w/n): its centre is (i+0.5)*w/n.
+    return int(np.floor((peak + 0.5) * w / n)) % w
+
+
+def apply_shift(rgb: np.ndarray, s: int) -> np.ndarray:
+    """``rgb`` rolled left by ``s`` columns."""
+    return np.roll(rgb, -int(s), axis=1)
+
+
+def shift_to_yaw_deg(columns: float, width: int) -> float:
+    """Columns of displacement to degrees, wrapped into (-180, 180]."""
+    deg = float(columns) * 360.0 / float(width)
+    deg = (deg + 180.0) % 360.0 - 180.0
+    return 180.0 if deg == -180.0 else deg
+
+
+def yaw_to_columns(yaw_deg: float, width: int) -> int:
+    """Degrees to the nearest whole column shift in [0, width)."""
+    return int(round(float(yaw_deg) * width / 360.0)) % int(width)
+
+
+def column_signature(rgb: np.ndarray, width: int = YAW_WIDTH) -> np.ndarray:
+    """Per-column signals (float64, (S, width')) for circular alignment.
+
+    For each of ``YAW_BANDS`` horizontal bands in the horizon band: the mean of each
+    colour channel and the mean gradient magnitude per column. Every signal is
+    normalised to zero mean and unit norm over the columns (flat signals become zero),
+    so brightness gain/offset does not matter and correlations are Pearson-like.
+    """
+    _check_rgb(rgb)
+    small = _band(_downscale(rgb, width))
+    grey = small.mean(axis=2)
+    grad = _gradient_magnitude(grey)
+    h, n = grey.shape
+    bands = min(YAW_BANDS, h)
+    edges = np.linspace(0, h, bands + 1).round().astype(int)
+    rows = []
+    for top, bottom in zip(edges[:-1], edges[1:]):  # a handful of bands, not pixels
+        rows.append(small[top:bottom].mean(axis=0).T)          # 3 x n colour
+        rows.append(grad[top:bottom].mean(axis=0)[None, :])    # 1 x n structure
+    sig = np.concatenate(rows, axis=0).astype(np.float64)
+    sig -= sig.mean(axis=1, keepdims=True)
+    norm = np.linalg.norm(sig, axis=1, keepdims=True)
+    return np.where(norm > 1e-9 * n, sig / np.maximum(norm, 1e-12), 0.0)
+
+
+def relative_yaw(rgb_a: np.ndarray, rgb_b: np.ndarray) -> tuple[float, float]:
+    """Heading of ``b`` relative to ``a``: ``(yaw_deg, score)``.
+
+    ``yaw_deg`` in (-180, 180] follows the module convention (``apply_shift(b,
+    yaw_to_columns(yaw_deg, W))`` aligns ``b`` with ``a``). ``score`` in [-1, 1] is the
+    mean Pearson correlation of the column signals at the best circular shift
+    (1 = identical up to a roll, ~0 = unrelated).
+    """
+    sa = column_signature(rgb_a)
+    sb = column_signature(rgb_b)
+    if sa.shape != sb.shape:
+        raise InputError(f"relative yaw needs panoramas of the same aspect, got {rgb_a.shape} and {rgb_b.shape}")
+    active = np.count_nonzero(np.any(sa != 0, axis=1) & np.any(sb != 0, axis=1))
+    if active == 0:
+        return 0.0, 0.0
+    n = sa.shape[1]
+    # corr[d] = sum_j a[j] * b[j + d]: content of a at j appears at j + d in b.
+    corr = np.fft.irfft(np.conj(np.fft.rfft(sa, axis=1)) * np.fft.rfft(sb, axis=1), n=n, axis=1).sum(axis=0)
+    corr /= active
+    best = int(np.argmax(corr))
+    d = _peak_subsample(corr, best)
+    return shift_to_yaw_deg(d, n), float(np.clip(corr[best], -1.0, 1.0))
