@@ -1,0 +1,55 @@
+"""Recording readers: videos, ROS1/ROS2 bags, image folders; ground-truth poses.
+
+``open_recording`` decides by what the path is:
+
+- a file with a video suffix (.mp4, .avi, .mkv, .mov, ...)  -> VideoSource
+- a ``.bag`` file (ROS1), a bare ``.db3`` or ``.mcap`` file  -> BagSource
+- a directory with metadata.yaml or a .db3/.mcap file (ROS2) -> BagSource
+- any other directory                                       -> FolderSource of images
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+from ..errors import InputError
+from ..frames import FrameSource
+from .folder import FolderSource
+from .poses import read_poses
+from .rosbag import BagSource, is_ros2_bag_dir, list_image_topics, list_pose_topics
+from .video import VIDEO_SUFFIXES, VideoSource
+
+__all__ = [
+    "BagSource",
+    "FolderSource",
+    "VideoSource",
+    "list_image_topics",
+    "list_pose_topics",
+    "open_recording",
+    "read_poses",
+]
+
+
+def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.0) -> FrameSource:
+    """Open any supported recording; InputError with a one-line reason otherwise.
+
+    ``topic`` chooses the image topic of a bag (needed when it has several);
+    ``interval`` is the spacing of a folder's frames when it has no stamps.csv.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    if path.is_dir():
+        if is_ros2_bag_dir(path):
+            return BagSource(path, topic)
+        return FolderSource(path, interval=interval)
+    suffix = path.suffix.lower()
+    if suffix in (".bag", ".db3", ".mcap"):
+        return BagSource(path, topic)
+    if suffix in VIDEO_SUFFIXES:
+        return VideoSource(path)
+    raise InputError(
+        f"{path}: unsupported file type {suffix or '(none)'!r}; expected a video, "
+        f"a ROS1 .bag, a ROS2 bag (directory, .db3 or .mcap) or a folder of images"
+    )

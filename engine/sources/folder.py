@@ -1,0 +1,145 @@
+"""A folder of equirectangular images (png, jpg, jpeg, bmp, tif, tiff) as a recording.
+
+Frames are the image files in natural name order (``img2`` before ``img10``).
+
+Stamps come from an optional ``stamps.csv`` in the folder, in one of two forms:
+
+1. one stamp (seconds) per line, no header, one line per image in name order::
+
+       0.0
+       0.5
+       1.0
+
+2. a header ``filename,stamp`` and one row per image (any row order)::
+
+       filename,stamp
+       frame_000000.png,1692000000.10
+       frame_000001.png,1692000000.60
+
+   Every image must have a row and every row must name an image of the folder.
+
+Blank lines are ignored. Stamps must not decrease in name order. Without
+stamps.csv the stamp of frame ``i`` is ``i * interval`` (interval given when
+opening, default 1.0 s).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..frames import Frame, FrameSource, check_equirectangular
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+STAMPS_FILE = "stamps.csv"
+
+
+def natural_key(name: str) -> list:
+    """Sort key that orders digit runs by value: img2 < img10."""
+    return [(0, int(part), "") if part.isdigit() else (1, 0, part.lower())
+            for part in re.split(r"(\d+)", name) if part]
+
+
+def image_files(folder: Path) -> list[Path]:
+    files = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+    return sorted(files, key=lambda p: natural_key(p.name))
+
+
+def read_stamps_csv(csv_path: Path, names: list[str]) -> np.ndarray:
+    """Stamps of the images ``names`` (in that order) from a stamps.csv (see module doc)."""
+    where = str(csv_path)
+    try:
+        lines = [ln.strip() for ln in csv_path.read_text().splitlines()]
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(f"{where}: cannot read ({err})") from None
+    lines = [ln for ln in lines if ln]
+    if lines and [c.strip().lower() for c in lines[0].split(",")] == ["filename", "stamp"]:
+        by_name: dict[str, float] = {}
+        for n, line in enumerate(lines[1:], start=2):
+            cells = [c.strip() for c in line.split(",")]
+            if len(cells) != 2:
+                raise InputError(f"{where}: line {n} must be 'filename,stamp', got {line!r}")
+            by_name[cells[0]] = _float(cells[1], where, n)
+        unknown = sorted(set(by_name) - set(names))
+        if unknown:
+            raise InputError(f"{where}: names images that are not in the folder: "
+                             f"{', '.join(unknown[:3])}")
+        missing = [nm for nm in names if nm not in by_name]
+        if missing:
+            raise InputError(f"{where}: no stamp for {len(missing)} image(s), e.g. {missing[0]}")
+        stamps = np.array([by_name[nm] for nm in names], dtype=np.float64)
+    else:
+        stamps = np.array([_float(ln, where, n) for n, ln in enumerate(lines, start=1)],
+                          dtype=np.float64)
+        if stamps.size != len(names):
+            raise InputError(f"{where}: {stamps.size} stamps for {len(names)} images "
+                             f"(one stamp per line, or a 'filename,stamp' header)")
+    if np.any(np.diff(stamps) < 0):
+        raise InputError(f"{where}: stamps decrease in file name order")
+    return stamps
+
+
+def _float(text: str, where: str, line: int) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"{where}: line {line}: {text!r} is not a stamp in seconds") from None
+    if not np.isfinite(value):
+        raise InputError(f"{where}: line {line}: stamp {text!r} is not finite")
+    return value
+
+
+class FolderSource(FrameSource):
+    """Image files of a folder, in natural name order."""
+
+    def __init__(self, path: str | Path, interval: float = 1.0) -> None:
+        self.path = Path(path)
+        if not self.path.is_dir():
+            raise InputError(f"{self.path}: no such folder")
+        self.files = image_files(self.path)
+        if not self.files:
+            raise InputError(f"{self.path}: folder has no images "
+                             f"({', '.join(s[1:] for s in IMAGE_SUFFIXES)})")
+        csv_path = self.path / STAMPS_FILE
+        if csv_path.exists():
+            self._stamps = read_stamps_csv(csv_path, [p.name for p in self.files])
+        else:
+            if interval <= 0:
+                raise InputError(f"{self.path}: interval must be positive, got {interval}")
+            self._stamps = np.arange(len(self.files), dtype=np.float64) * float(interval)
+        first = self._read(0)
+        self._resolution = (first.shape[1], first.shape[0])
+
+    def _read(self, index: int) -> np.ndarray:
+        file = self.files[index]
+        bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise InputError(f"{file}: unreadable or corrupt image")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        check_equirectangular(rgb, str(file))
+        return rgb
+
+    @property
+    def frame_count(self) -> int:
+        return len(self.files)
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self._resolution
+
+    def stamps(self) -> np.ndarray:
+        return self._stamps.copy()
+
+    def frame_at(self, index: int) -> Frame:
+        if not 0 <= index < len(self.files):
+            raise IndexError(f"frame {index} outside 0..{len(self.files) - 1}")
+        rgb = self._read(index)
+        if (rgb.shape[1], rgb.shape[0]) != self._resolution:
+            w, h = self._resolution
+            raise InputError(f"{self.files[index]}: image is {rgb.shape[1]}x{rgb.shape[0]}, "
+                             f"the folder's first image is {w}x{h}")
+        return Frame(index, float(self._stamps[index]), rgb)

@@ -1,0 +1,295 @@
+"""ROS1 .bag and ROS2 bags (directory, bare .db3, bare .mcap) as frame sources.
+
+Image topics are ``sensor_msgs/msg/Image`` (rgb8, bgr8, mono8, mono16, bayer_*,
+... anything rosbags-image converts) and ``sensor_msgs/msg/CompressedImage``.
+Frames come out RGB uint8; grey images are repeated over three channels and
+16-bit images are scaled to 8 bit.
+
+A frame's stamp is its header stamp (``sec + nanosec * 1e-9``, ROS time), or its
+log time when the header stamp is zero. Opening a bag reads every message of the
+topic once without deserialising it (the header stamp sits at a fixed place in
+the serialised bytes) and keeps only (log time, rank) per frame, so memory stays
+small for big bags; ``frame_at`` re-reads one message through a one-nanosecond
+time window.
+"""
+
+from __future__ import annotations
+
+import struct
+import threading
+from pathlib import Path
+from typing import Any, Iterator, Optional, Sequence
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..frames import Frame, FrameSource, check_equirectangular, sample_indices
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+POSE_TYPES = (
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+)
+ROS2_STORAGE_SUFFIXES = (".db3", ".mcap")
+
+
+# --- opening bags and choosing topics -------------------------------------------
+
+
+def is_ros2_bag_dir(path: Path) -> bool:
+    """A directory holding a ROS2 bag (metadata.yaml or storage files)."""
+    return path.is_dir() and (
+        (path / "metadata.yaml").exists()
+        or any(p.suffix in ROS2_STORAGE_SUFFIXES for p in path.iterdir())
+    )
+
+
+def _reader_path(path: Path) -> Path:
+    """The path rosbags should open for ``path``.
+
+    rosbags opens a ROS2 directory only through its metadata.yaml; a directory
+    without one but with a single .db3/.mcap file is opened as that bare file.
+    """
+    if not path.exists():
+        raise InputError(f"{path}: no such file or directory")
+    if path.is_dir() and not (path / "metadata.yaml").exists():
+        files = sorted(p for p in path.iterdir() if p.suffix in ROS2_STORAGE_SUFFIXES)
+        if len(files) != 1:
+            raise InputError(
+                f"{path}: not a ROS2 bag (no metadata.yaml and "
+                f"{len(files)} .db3/.mcap files instead of one)"
+            )
+        return files[0]
+    return path
+
+
+def open_bag(path: Path) -> Any:
+    """An open ``rosbags.highlevel.AnyReader``; InputError when the bag is unreadable."""
+    from rosbags.highlevel import AnyReader
+
+    target = _reader_path(Path(path))
+    if target.is_file() and target.suffix not in (".bag",) + ROS2_STORAGE_SUFFIXES:
+        raise InputError(f"{path}: not a ROS bag (expected .bag, .db3, .mcap or a bag directory)")
+    try:
+        reader = AnyReader([target])
+        reader.open()
+    except Exception as err:  # rosbags raises many types for corrupt files
+        raise InputError(f"{path}: unreadable ROS bag ({_one_line(err)})") from None
+    return reader
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split()) or type(err).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def _topics(reader: Any, msgtypes: Sequence[str]) -> list[tuple[str, str, int]]:
+    counts: dict[tuple[str, str], int] = {}
+    for c in reader.connections:
+        if c.msgtype in msgtypes:
+            counts[(c.topic, c.msgtype)] = counts.get((c.topic, c.msgtype), 0) + c.msgcount
+    return sorted((t, m, n) for (t, m), n in counts.items())
+
+
+def list_image_topics(path: str | Path) -> list[tuple[str, str, int]]:
+    """(topic, msgtype, message count) of every image topic in the bag, by topic name."""
+    reader = open_bag(Path(path))
+    try:
+        return _topics(reader, IMAGE_TYPES)
+    finally:
+        reader.close()
+
+
+def list_pose_topics(path: str | Path) -> list[tuple[str, str, int]]:
+    """(topic, msgtype, message count) of every Odometry/PoseStamped topic in the bag."""
+    reader = open_bag(Path(path))
+    try:
+        return _topics(reader, POSE_TYPES)
+    finally:
+        reader.close()
+
+
+def choose_topic(reader: Any, path: Path, topic: Optional[str],
+                 msgtypes: Sequence[str], kind: str) -> tuple[str, list[Any]]:
+    """The topic to read and its connections; InputError when none or ambiguous."""
+    available = _topics(reader, msgtypes)
+    names = sorted({t for t, _, _ in available})
+    if topic is None:
+        if not names:
+            everything = sorted({c.topic for c in reader.connections})
+            raise InputError(f"{path}: no {kind} topic in this bag "
+                             f"(topics: {', '.join(everything) or 'none'})")
+        if len(names) > 1:
+            raise InputError(f"{path}: several {kind} topics, choose one with --topic: "
+                             f"{', '.join(names)}")
+        topic = names[0]
+    elif topic not in names:
+        raise InputError(f"{path}: no {kind} topic {topic!r}; available {kind} topics: "
+                         f"{', '.join(names) or 'none'}")
+    return topic, [c for c in reader.connections if c.topic == topic and c.msgtype in msgtypes]
+
+
+def header_stamp_ns(raw: bytes | memoryview, ros2: bool) -> int:
+    """Header stamp of a serialised message that starts with std_msgs/Header.
+
+    ROS1: uint32 seq, uint32 sec, uint32 nsec (little endian).
+    ROS2 CDR: 4-byte encapsulation (byte 1 odd = little endian), int32 sec, uint32 nanosec.
+    Both put the stamp at bytes 4..12.
+    """
+    endian = "<" if (not ros2 or raw[1] & 1) else ">"
+    sec, nsec = struct.unpack_from(endian + ("iI" if ros2 else "II"), raw, 4)
+    return int(sec) * 1_000_000_000 + int(nsec)
+
+
+def message_stamp(msg: Any, log_ns: int) -> float:
+    """Header stamp in seconds, or the log time when the header stamp is zero."""
+    stamp = msg.header.stamp
+    ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+    return (ns if ns else log_ns) * 1e-9
+
+
+# --- image conversion -----------------------------------------------------------
+
+
+def message_to_rgb(msg: Any, msgtype: str) -> np.ndarray:
+    """RGB uint8 H x W x 3 from an Image or CompressedImage message (raises ValueError)."""
+    from rosbags.image import ImageError, compressed_image_to_cvimage, message_to_cvimage
+
+    try:
+        if msgtype == "sensor_msgs/msg/CompressedImage":
+            # Decode without a target colour space: rosbags-image assumes colour input,
+            # grey JPEG/PNG would fail its bgr8 conversion.
+            img = compressed_image_to_cvimage(msg)
+            if img is None:
+                raise ValueError("not a decodable JPEG/PNG image")
+            if img.dtype == np.uint16:
+                img = (img.astype(np.float32) * (255.0 / 65535.0) + 0.5).astype(np.uint8)
+            if img.ndim == 2:
+                return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+            if img.shape[2] == 4:
+                return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+            return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        rgb = message_to_cvimage(msg, "rgb8")
+        return np.ascontiguousarray(rgb, dtype=np.uint8)
+    except AssertionError:  # rosbags-image asserts on undecodable compressed data
+        raise ValueError("not a decodable JPEG/PNG image") from None
+    except (ImageError, cv2.error, TypeError) as err:
+        raise ValueError(_one_line(err)) from None
+
+
+# --- the frame source -----------------------------------------------------------
+
+
+class BagSource(FrameSource):
+    """Frames of one image topic of a ROS1 or ROS2 bag."""
+
+    def __init__(self, path: str | Path, topic: Optional[str] = None) -> None:
+        self.path = Path(path)
+        self._reader = open_bag(self.path)
+        self._lock = threading.Lock()  # frame_at may be called from several threads
+        try:
+            self.topic, self._connections = choose_topic(
+                self._reader, self.path, topic, IMAGE_TYPES, "image")
+            self._index_messages()
+            first = self.frame_at(0)
+        except BaseException:
+            self._reader.close()
+            raise
+        h, w = first.rgb.shape[:2]
+        self._resolution = (w, h)
+
+    def _index_messages(self) -> None:
+        """One pass over the topic: log time, rank among equal log times, stamp."""
+        log_ns: list[int] = []
+        ranks: list[int] = []
+        stamps_ns: list[int] = []
+        try:
+            for _, t, raw in self._reader.messages(connections=self._connections):
+                ranks.append(ranks[-1] + 1 if log_ns and log_ns[-1] == t else 0)
+                log_ns.append(t)
+                stamp = header_stamp_ns(raw, self._reader.is2)
+                stamps_ns.append(stamp if stamp else t)
+        except (struct.error, IndexError):
+            raise InputError(f"{self.path}: a message on {self.topic} is truncated") from None
+        except Exception as err:
+            raise InputError(f"{self.path}: cannot read {self.topic} ({_one_line(err)})") from None
+        if not log_ns:
+            raise InputError(f"{self.path}: image topic {self.topic} has no messages")
+        # Frames are ordered by stamp; the stable sort keeps bag order for equal stamps.
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        self._order = np.argsort(stamps, kind="stable")  # frame index -> position in bag
+        self._log_ns = np.asarray(log_ns, dtype=np.int64)[self._order]
+        self._rank = np.asarray(ranks, dtype=np.int64)[self._order]
+        self._stamps = stamps[self._order].astype(np.float64) * 1e-9
+        self._in_bag_order = bool(np.all(self._order == np.arange(self._order.size)))
+
+    @property
+    def frame_count(self) -> int:
+        return int(self._stamps.size)
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self._resolution
+
+    def stamps(self) -> np.ndarray:
+        return self._stamps.copy()
+
+    def frame_at(self, index: int) -> Frame:
+        if not 0 <= index < self.frame_count:
+            raise IndexError(f"frame {index} outside 0..{self.frame_count - 1}")
+        t = int(self._log_ns[index])
+        with self._lock:
+            try:
+                window = self._reader.messages(connections=self._connections, start=t, stop=t + 1)
+                for rank, (conn, _, raw) in enumerate(window):
+                    if rank == self._rank[index]:
+                        return self._decode(conn, raw, index)
+            except InputError:
+                raise
+            except Exception as err:
+                raise InputError(f"{self.path}: cannot read frame {index} of {self.topic} "
+                                 f"({_one_line(err)})") from None
+        raise InputError(f"{self.path}: frame {index} of {self.topic} vanished from the bag")
+
+    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+        """Sampled frames in one forward pass over the bag (own reader, so that
+        ``frame_at`` stays usable meanwhile); only the sampled ones are decoded."""
+        wanted = sample_indices(self._stamps, interval)
+        if not self._in_bag_order:
+            yield from super().frames(interval)
+            return
+        wanted_set = set(int(i) for i in wanted)
+        reader = open_bag(self.path)
+        try:
+            conns = [c for c in reader.connections if c.topic == self.topic
+                     and c.msgtype in IMAGE_TYPES]
+            left = len(wanted_set)
+            for position, (conn, _, raw) in enumerate(reader.messages(connections=conns)):
+                if position in wanted_set:
+                    yield self._decode(conn, raw, position, reader)
+                    left -= 1
+                    if left == 0:
+                        break
+        finally:
+            reader.close()
+
+    def _decode(self, conn: Any, raw: bytes, index: int, reader: Any = None) -> Frame:
+        reader = reader or self._reader
+        where = f"{self.path}: frame {index} of {self.topic}"
+        try:
+            msg = reader.deserialize(raw, conn.msgtype)
+        except Exception as err:
+            raise InputError(f"{where} cannot be deserialised ({_one_line(err)})") from None
+        try:
+            rgb = message_to_rgb(msg, conn.msgtype)
+        except ValueError as err:
+            raise InputError(f"{where} is corrupt or unsupported ({err})") from None
+        check_equirectangular(rgb, where)
+        return Frame(index=index, stamp=float(self._stamps[index]), rgb=rgb)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._reader is not None and self._reader.stack is not None:
+                self._reader.close()

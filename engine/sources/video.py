@@ -1,0 +1,199 @@
+"""Equirectangular video files read through OpenCV.
+
+Stamps are the container's presentation times (``CAP_PROP_POS_MSEC`` read after
+each ``grab()``), shifted so that the first frame is at 0 s; when the container
+gives no usable times they are ``index / fps``. Knowing all stamps needs one
+pass over the video, done lazily once and cached. Skipped frames are only
+grabbed (decoded, not converted to RGB); ``frames(interval)`` picks the sampled
+frames in a single forward pass with the same rule as
+``engine.frames.sample_indices``.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Iterator, Optional
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..frames import Frame, FrameSource, check_equirectangular
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm", ".mpg", ".mpeg",
+                  ".wmv", ".flv", ".ts", ".mts", ".3gp", ".ogv")
+
+# Forward gaps up to this many frames are grabbed through; larger ones seek
+# (a seek decodes from the previous key frame, so small gaps are cheaper to walk).
+SEEK_GAP = 48
+# Same tolerance as engine.frames.sample_indices.
+EPS = 1e-6
+
+
+def _open_capture(path: Path) -> cv2.VideoCapture:
+    cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        cap.release()
+        raise InputError(f"{path}: unreadable or unsupported video container")
+    return cap
+
+
+class VideoSource(FrameSource):
+    """A video file; random access for the GUI and a single pass for sampling."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InputError(f"{self.path}: no such file")
+        self._cap = _open_capture(self.path)
+        self._lock = threading.Lock()
+        self.fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        self._stamps: Optional[np.ndarray] = None
+        self._next = 0  # index the next grab() of self._cap returns
+        self._last: Optional[Frame] = None
+        if not self._cap.grab():
+            self._cap.release()
+            raise InputError(f"{self.path}: video has no decodable frame")
+        self._first_ms = float(self._cap.get(cv2.CAP_PROP_POS_MSEC))
+        self._next = 1
+        ok, bgr = self._cap.retrieve()
+        if not ok or bgr is None:
+            self._cap.release()
+            raise InputError(f"{self.path}: first frame cannot be decoded")
+        rgb = self._to_rgb(bgr)
+        check_equirectangular(rgb, str(self.path))
+        self._resolution = (rgb.shape[1], rgb.shape[0])
+        self._last = Frame(0, 0.0, rgb)
+
+    # --- stamps -----------------------------------------------------------------
+
+    def _stamp_from(self, cap: cv2.VideoCapture, index: int, prev: Optional[float]) -> float:
+        """Stamp of the frame just grabbed: container time, or index / fps when the
+        container time is missing or does not increase."""
+        t = (float(cap.get(cv2.CAP_PROP_POS_MSEC)) - self._first_ms) * 1e-3
+        if index == 0:
+            return 0.0
+        if prev is not None and t > prev:
+            return round(t, 9)
+        if self.fps > 0:
+            return index / self.fps
+        raise InputError(f"{self.path}: video has neither frame times nor a frame rate")
+
+    def stamps(self) -> np.ndarray:
+        if self._stamps is None:
+            cap = _open_capture(self.path)
+            try:
+                out: list[float] = []
+                while cap.grab():
+                    out.append(self._stamp_from(cap, len(out), out[-1] if out else None))
+            finally:
+                cap.release()
+            self._stamps = self._consistent(np.asarray(out, dtype=np.float64))
+        return self._stamps.copy()
+
+    def _consistent(self, stamps: np.ndarray) -> np.ndarray:
+        """Use container times only when they increase throughout; else index / fps."""
+        if stamps.size > 1 and not np.all(np.diff(stamps) > 0):
+            if self.fps <= 0:
+                raise InputError(f"{self.path}: video has neither frame times nor a frame rate")
+            stamps = np.arange(stamps.size, dtype=np.float64) / self.fps
+        return stamps
+
+    @property
+    def frame_count(self) -> int:
+        return int(self.stamps().size)
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self._resolution
+
+    # --- frames -----------------------------------------------------------------
+
+    def _to_rgb(self, bgr: np.ndarray) -> np.ndarray:
+        if bgr.ndim == 2:
+            return cv2.cvtColor(bgr, cv2.COLOR_GRAY2RGB)
+        return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+    def frame_at(self, index: int) -> Frame:
+        stamps = self.stamps()
+        if not 0 <= index < stamps.size:
+            raise IndexError(f"frame {index} outside 0..{stamps.size - 1}")
+        with self._lock:
+            if self._last is not None and self._last.index == index:
+                return self._last
+            if index < self._next or index - self._next > SEEK_GAP:
+                self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+                self._next = index
+            while self._next < index:
+                if not self._cap.grab():
+                    break
+                self._next += 1
+            ok = self._cap.grab()
+            bgr = self._cap.retrieve()[1] if ok else None
+            if bgr is None:
+                self._next = stamps.size  # position unknown: seek next time
+                raise InputError(f"{self.path}: frame {index} cannot be decoded")
+            self._next = index + 1
+            rgb = self._to_rgb(bgr)
+            check_equirectangular(rgb, f"{self.path}: frame {index}")
+            self._last = Frame(index, float(stamps[index]), rgb)
+            return self._last
+
+    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+        """Sampled frames in one forward pass on a capture of its own.
+
+        Picks, for t_k = k * interval, the first frame with stamp >= t_k (each
+        frame once), like ``sample_indices``; also fills the stamp cache when the
+        pass reaches the end.
+        """
+        if self._stamps is not None:
+            yield from self._frames_known(interval)
+            return
+        cap = _open_capture(self.path)
+        try:
+            seen: list[float] = []
+            k = 0  # next target time index
+            while cap.grab():
+                index = len(seen)
+                stamp = self._stamp_from(cap, index, seen[-1] if seen else None)
+                seen.append(stamp)
+                take = interval <= 0 or stamp >= k * interval - EPS
+                if interval > 0:
+                    while k * interval - EPS <= stamp:
+                        k += 1
+                if take:
+                    ok, bgr = cap.retrieve()
+                    if not ok or bgr is None:
+                        raise InputError(f"{self.path}: frame {index} cannot be decoded")
+                    rgb = self._to_rgb(bgr)
+                    check_equirectangular(rgb, f"{self.path}: frame {index}")
+                    yield Frame(index, stamp, rgb)
+            self._stamps = self._consistent(np.asarray(seen, dtype=np.float64))
+        finally:
+            cap.release()
+
+    def _frames_known(self, interval: float) -> Iterator[Frame]:
+        """Single pass when the stamps are already known."""
+        wanted = set(int(i) for i in self.sample_indices(interval))
+        stamps = self._stamps
+        assert stamps is not None
+        cap = _open_capture(self.path)
+        try:
+            index = 0
+            while wanted and cap.grab():
+                if index in wanted:
+                    wanted.discard(index)
+                    ok, bgr = cap.retrieve()
+                    if not ok or bgr is None:
+                        raise InputError(f"{self.path}: frame {index} cannot be decoded")
+                    rgb = self._to_rgb(bgr)
+                    check_equirectangular(rgb, f"{self.path}: frame {index}")
+                    yield Frame(index, float(stamps[index]), rgb)
+                index += 1
+        finally:
+            cap.release()
+
+    def close(self) -> None:
+        with self._lock:
+            self._cap.release()
