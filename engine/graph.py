@@ -1,0 +1,351 @@
+"""The map model: a networkx graph of nodes, path arcs and loop arcs, and GraphML I/O.
+
+GraphML contract (DESIGN.md), one attribute = one type everywhere:
+
+* graph: ``generator`` ("panotopo <version>"), ``source``, ``method``,
+  ``descriptor`` (str) and every parameter used (``node_sim_th``, ``loop_sim_th``
+  float; ``window_size``, ``count_th``, ``neighbor_node_num`` int; ``interval``
+  float when known; anything from ``extra_meta``).
+* node ``n<k>``: ``index`` int, ``frame`` int, ``stamp`` float, ``shift`` int,
+  ``label`` str, ``x``/``y`` float only when positions are known.
+* edge: ``kind`` "sequential" | "loop"; ``similarity`` float; ``status``
+  "auto" | "confirmed" | "rejected" | "manual"; ``yaw`` float degrees only where
+  estimated; ``window_count`` int on loop arcs (an addition to the contract).
+
+Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
+confirmed/rejected/manual loops and labels survive a re-run with other parameters.
+"""
+
+from __future__ import annotations
+
+import copy as _copy
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterable, Optional
+
+import networkx as nx
+import numpy as np
+
+from . import __version__
+from .descriptors.base import Descriptors
+from .errors import InputError
+from .loops import LoopCandidate
+from .params import MapParams
+
+STATUSES = ("auto", "confirmed", "rejected", "manual")
+SETTABLE_STATUSES = ("auto", "confirmed", "rejected")
+
+# Attributes whose type is fixed by the contract; values are cast on the way in and out.
+_NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label": str,
+               "x": float, "y": float}
+_EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
+               "window_count": int}
+_GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
+                "node_sim_th": float, "loop_sim_th": float, "window_size": int,
+                "count_th": int, "neighbor_node_num": int, "interval": float}
+
+
+def _plain(value, kind=None):
+    """A GraphML-safe Python value: int, float or str (no numpy, no bool, no None)."""
+    if kind is not None:
+        return kind(value)
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)  # bools are read back inconsistently; store 0/1
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value)
+    if isinstance(value, str):
+        return value
+    return json.dumps(value, default=str)  # lists, dicts: one string
+
+
+def _clean_meta(meta: dict) -> dict:
+    return {str(k): _plain(v, _GRAPH_TYPES.get(k)) for k, v in meta.items() if v is not None}
+
+
+class TopoMap:
+    """Nodes, path arcs and loop arcs, with the user's curation."""
+
+    def __init__(self, graph: nx.Graph, meta: dict, node_rows: Optional[np.ndarray] = None,
+                 node_vectors: Optional[np.ndarray] = None):
+        self.graph = graph
+        self.meta = meta
+        self.node_rows = node_rows          # rows of the Descriptors that are nodes
+        self.node_vectors = node_vectors    # (m, d) descriptors of the nodes, when known
+        self.unapplied: dict[str, list] = {"loops": [], "manual": [], "labels": []}
+
+    # ----- construction -------------------------------------------------------------
+    @classmethod
+    def build(cls, descs: Descriptors, node_rows: np.ndarray, loops: list[LoopCandidate],
+              params: MapParams, source: str = "", extra_meta: Optional[dict] = None) -> "TopoMap":
+        node_rows = np.asarray(node_rows, dtype=np.int64)
+        m = node_rows.size
+        vectors = np.asarray(descs.vectors, dtype=np.float32)[node_rows]
+        g = nx.Graph()
+        for k, row in enumerate(node_rows):
+            g.add_node(f"n{k}", index=k, frame=int(descs.frames[row]),
+                       stamp=float(descs.stamps[row]), shift=int(descs.shifts[row]), label="")
+        if m > 1:
+            path_sims = np.einsum("ij,ij->i", vectors[:-1], vectors[1:])
+            for k in range(m - 1):
+                g.add_edge(f"n{k}", f"n{k + 1}", kind="sequential",
+                           similarity=float(path_sims[k]), status="auto")
+        for lc in loops:
+            if not (0 <= lc.a < m and 0 <= lc.b < m) or abs(lc.b - lc.a) < 2:
+                continue  # out of range, or already a path arc
+            attrs = dict(kind="loop", similarity=float(lc.similarity), status="auto",
+                         window_count=int(lc.window_count))
+            if lc.yaw is not None:
+                attrs["yaw"] = float(lc.yaw)
+            g.add_edge(f"n{lc.a}", f"n{lc.b}", **attrs)
+
+        dmeta = descs.meta or {}
+        meta = {
+            "generator": f"panotopo {__version__}",
+            "source": source,
+            "descriptor": str(dmeta.get("descriptor", dmeta.get("name", ""))),
+        }
+        if dmeta.get("interval") is not None:
+            meta["interval"] = dmeta["interval"]
+        meta.update(params.as_dict())
+        meta.update(extra_meta or {})
+        meta = _clean_meta(meta)
+        g.graph.update(meta)
+        return cls(g, meta, node_rows, vectors)
+
+    # ----- queries ------------------------------------------------------------------
+    @staticmethod
+    def node_id(k: int) -> str:
+        return f"n{int(k)}"
+
+    @property
+    def node_count(self) -> int:
+        return self.graph.number_of_nodes()
+
+    def _ordered(self) -> list[str]:
+        return sorted(self.graph.nodes, key=lambda n: self.graph.nodes[n]["index"])
+
+    def _node_array(self, key: str, dtype) -> np.ndarray:
+        return np.asarray([self.graph.nodes[n][key] for n in self._ordered()], dtype=dtype)
+
+    def frames(self) -> np.ndarray:
+        return self._node_array("frame", np.int64)
+
+    def stamps(self) -> np.ndarray:
+        return self._node_array("stamp", np.float64)
+
+    def positions(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """Node (x, y) when every node has one, else None."""
+        nodes = self._ordered()
+        if not nodes or not all("x" in self.graph.nodes[n] and "y" in self.graph.nodes[n] for n in nodes):
+            return None
+        return self._node_array("x", np.float64), self._node_array("y", np.float64)
+
+    def loops(self, statuses: Optional[Iterable[str]] = None) -> list[tuple[str, str, dict]]:
+        """Loop arcs (u, v, attributes) with u the lower index, sorted by index."""
+        wanted = None if statuses is None else set(statuses)
+        out = []
+        for u, v, d in self.graph.edges(data=True):
+            if d.get("kind") != "loop" or (wanted is not None and d.get("status") not in wanted):
+                continue
+            if self.graph.nodes[u]["index"] > self.graph.nodes[v]["index"]:
+                u, v = v, u
+            out.append((u, v, d))
+        out.sort(key=lambda e: (self.graph.nodes[e[0]]["index"], self.graph.nodes[e[1]]["index"]))
+        return out
+
+    def _loop_attrs(self, u: str, v: str) -> dict:
+        if not self.graph.has_edge(u, v) or self.graph.edges[u, v].get("kind") != "loop":
+            raise InputError(f"there is no loop arc between {u} and {v}")
+        return self.graph.edges[u, v]
+
+    def _check_node(self, n: str) -> None:
+        if n not in self.graph:
+            raise InputError(f"there is no node {n}")
+
+    # ----- curation -----------------------------------------------------------------
+    def set_status(self, u: str, v: str, status: str) -> None:
+        if status not in SETTABLE_STATUSES:
+            raise InputError(f"status must be one of {', '.join(SETTABLE_STATUSES)}, got {status!r}")
+        attrs = self._loop_attrs(u, v)
+        if attrs["status"] == "manual":
+            raise InputError(f"the loop {u}-{v} was added by hand; remove it instead")
+        attrs["status"] = status
+
+    def add_manual_loop(self, u: str, v: str, yaw: Optional[float] = None,
+                        similarity: Optional[float] = None) -> None:
+        self._check_node(u)
+        self._check_node(v)
+        if u == v:
+            raise InputError("a loop needs two different nodes")
+        if self.graph.has_edge(u, v):
+            raise InputError(f"nodes {u} and {v} are already joined")
+        if similarity is None:
+            similarity = self._similarity(u, v)
+        attrs = dict(kind="loop", similarity=float(similarity), status="manual", window_count=0)
+        if yaw is not None:
+            attrs["yaw"] = float(yaw)
+        self.graph.add_edge(u, v, **attrs)
+
+    def _similarity(self, u: str, v: str) -> float:
+        if self.node_vectors is None:
+            return float("nan")
+        i, j = self.graph.nodes[u]["index"], self.graph.nodes[v]["index"]
+        return float(self.node_vectors[i] @ self.node_vectors[j])
+
+    def remove_loop(self, u: str, v: str) -> None:
+        attrs = self._loop_attrs(u, v)
+        if attrs["status"] != "manual":
+            raise InputError(f"the loop {u}-{v} was detected, not added by hand; reject it instead")
+        self.graph.remove_edge(u, v)
+
+    def set_label(self, node: str, label: str) -> None:
+        self._check_node(node)
+        self.graph.nodes[node]["label"] = str(label)
+
+    def set_positions(self, x: np.ndarray, y: np.ndarray) -> None:
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        if x.shape != (self.node_count,) or y.shape != (self.node_count,):
+            raise InputError(f"positions must have one value per node ({self.node_count})")
+        if not (np.isfinite(x).all() and np.isfinite(y).all()):
+            raise InputError("positions must be finite numbers")
+        for n, xi, yi in zip(self._ordered(), x, y):
+            self.graph.nodes[n]["x"] = float(xi)
+            self.graph.nodes[n]["y"] = float(yi)
+
+    # ----- decisions (curation keyed by source frames) --------------------------------
+    def decisions(self) -> dict:
+        """The user's curation as JSON-ready data keyed by source frame numbers.
+
+        Decisions that could not be applied to this map (``unapplied``) are kept so
+        they are never lost across re-runs.
+        """
+        frame = {n: int(d["frame"]) for n, d in self.graph.nodes(data=True)}
+        loops, manual = [], []
+        for u, v, d in self.loops():
+            if d["status"] == "manual":
+                manual.append({"frames": [frame[u], frame[v]],
+                               "yaw": float(d["yaw"]) if "yaw" in d else None})
+            elif d["status"] != "auto":
+                loops.append({"frames": [frame[u], frame[v]], "status": d["status"]})
+        labels = [{"frame": frame[n], "label": self.graph.nodes[n]["label"]}
+                  for n in self._ordered() if self.graph.nodes[n].get("label")]
+        return {"loops": loops + _copy.deepcopy(self.unapplied["loops"]),
+                "manual": manual + _copy.deepcopy(self.unapplied["manual"]),
+                "labels": labels + _copy.deepcopy(self.unapplied["labels"])}
+
+    def apply_decisions(self, dec: dict) -> None:
+        """Re-apply ``decisions()`` (possibly from another run) onto this map.
+
+        * status: to the loop arc whose node frames are exactly (fa, fb), else to the
+          loop arc between the nodes nearest in frame to fa and fb, if there is one;
+        * manual loop: between the nodes nearest in frame; an existing loop arc there
+          becomes manual (the user asserted it);
+        * label: on the node nearest in frame.
+        Whatever cannot be applied goes to ``unapplied`` (and back out in decisions()).
+        """
+        self.unapplied = {"loops": [], "manual": [], "labels": []}
+        if self.node_count == 0:
+            self.unapplied = {k: list(_copy.deepcopy(dec.get(k, []))) for k in self.unapplied}
+            return
+        order = self._ordered()
+        frames = self.frames()
+        by_frame = {int(f): n for f, n in zip(frames, order)}
+
+        def nearest(f: int) -> str:  # the first of two equally near nodes
+            return order[int(np.argmin(np.abs(frames - f)))]
+
+        def is_loop(u: str, v: str) -> bool:
+            return self.graph.has_edge(u, v) and self.graph.edges[u, v].get("kind") == "loop"
+
+        for item in dec.get("loops", []):
+            fa, fb = (int(f) for f in item["frames"])
+            status = item.get("status")
+            u, v = by_frame.get(fa), by_frame.get(fb)
+            if u is None or v is None or not is_loop(u, v):
+                u, v = nearest(fa), nearest(fb)
+            if (status in SETTABLE_STATUSES and u != v and is_loop(u, v)
+                    and self.graph.edges[u, v]["status"] != "manual"):
+                self.graph.edges[u, v]["status"] = status
+            else:
+                self.unapplied["loops"].append(_copy.deepcopy(item))
+
+        for item in dec.get("manual", []):
+            fa, fb = (int(f) for f in item["frames"])
+            u, v = nearest(fa), nearest(fb)
+            yaw = item.get("yaw")
+            if u != v and is_loop(u, v):
+                attrs = self.graph.edges[u, v]
+                attrs["status"] = "manual"
+                if yaw is not None:
+                    attrs["yaw"] = float(yaw)
+            elif u != v and not self.graph.has_edge(u, v):
+                self.add_manual_loop(u, v, yaw=yaw)
+            else:  # same node, or a path arc: nothing to add
+                self.unapplied["manual"].append(_copy.deepcopy(item))
+
+        for item in dec.get("labels", []):
+            self.graph.nodes[nearest(int(item["frame"]))]["label"] = str(item["label"])
+
+    # ----- copies and export --------------------------------------------------------------
+    def copy(self) -> "TopoMap":
+        out = TopoMap(_copy.deepcopy(self.graph), dict(self.meta),
+                      None if self.node_rows is None else self.node_rows.copy(),
+                      None if self.node_vectors is None else self.node_vectors.copy())
+        out.unapplied = _copy.deepcopy(self.unapplied)
+        return out
+
+    def corrected(self, keep_rejected: bool = False) -> nx.Graph:
+        """The graph for export, attributes cast to their contract types."""
+        g = nx.Graph()
+        g.graph.update(_clean_meta(self.graph.graph))
+        for n in self._ordered():
+            d = self.graph.nodes[n]
+            g.add_node(n, **{k: _plain(v, _NODE_TYPES.get(k)) for k, v in d.items() if v is not None})
+        for u, v, d in self.graph.edges(data=True):
+            if d.get("status") == "rejected" and not keep_rejected:
+                continue
+            g.add_edge(u, v, **{k: _plain(val, _EDGE_TYPES.get(k)) for k, val in d.items()
+                                if val is not None})
+        return g
+
+    def write_graphml(self, path: str | Path, keep_rejected: bool = False) -> None:
+        """Write the corrected map; atomic (a temporary file replaced into place)."""
+        path = Path(path)
+        g = self.corrected(keep_rejected)
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        try:
+            nx.write_graphml(g, tmp, infer_numeric_types=False)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    @classmethod
+    def read_graphml(cls, path: str | Path) -> "TopoMap":
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: no such file")
+        try:
+            g = nx.read_graphml(path)
+        except Exception as exc:  # XML or GraphML errors all mean the same to a user
+            raise InputError(f"{path}: cannot read GraphML ({exc.__class__.__name__})") from None
+        if not str(g.graph.get("generator", "")).startswith("panotopo"):
+            raise InputError(f"{path}: not a panotopo map (no panotopo generator attribute)")
+        if g.is_directed() or g.is_multigraph():
+            g = nx.Graph(g)
+        for n, d in g.nodes(data=True):
+            if "index" not in d or "frame" not in d or "stamp" not in d:
+                raise InputError(f"{path}: node {n} lacks index/frame/stamp")
+            d.setdefault("label", "")
+            d.setdefault("shift", 0)
+        for _, _, d in g.edges(data=True):
+            d.setdefault("status", "auto")
+            d.setdefault("kind", "sequential")
+        meta = dict(g.graph)
+        return cls(g, meta, None, None)
