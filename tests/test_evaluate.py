@@ -1,0 +1,168 @@
+import json
+
+import numpy as np
+import pytest
+
+from engine.descriptors.base import Descriptors
+from engine.errors import InputError
+from engine.evaluate import evaluate
+from engine.graph import TopoMap
+from engine.loops import LoopCandidate
+from engine.params import MapParams
+from engine.poses import Poses
+
+# Hand-made route, 13 nodes (index: x, y in metres): out along y = 0, a turn, back
+# the same way, a detour, and a return next to node 4.
+POSITIONS = np.array([
+    (0.0, 0.0),   # 0
+    (2.0, 0.0),   # 1
+    (4.0, 0.0),   # 2
+    (6.0, 0.0),   # 3
+    (6.0, 2.0),   # 4
+    (5.5, 0.8),   # 5  0.94 m from node 3, but only 2 nodes later
+    (4.0, 0.5),   # 6  0.5 m from node 2
+    (2.0, 0.3),   # 7  0.3 m from node 1
+    (0.0, 0.4),   # 8  0.4 m from node 0
+    (0.0, 0.9),   # 9  0.9 m from node 0 (0.5 m from node 8, but that is a path arc)
+    (10.0, 5.0),  # 10
+    (8.0, 4.0),   # 11
+    (6.2, 2.1),   # 12 0.22 m from node 4
+])
+
+
+def hand_map(nn: int = 2) -> TopoMap:
+    m = len(POSITIONS)
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(m, 8)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    descs = Descriptors(stamps=np.arange(m, dtype=np.float64) * 2.0, frames=np.arange(m) * 60,
+                        shifts=np.zeros(m, np.int64), vectors=v, meta={"descriptor": "t"})
+    loops = [LoopCandidate(a, b, 0.6, 3) for a, b in
+             [(2, 6), (0, 8), (3, 5), (1, 10), (4, 12), (6, 11)]]
+    params = MapParams(method="ours", node_sim_th=0.8, loop_sim_th=0.5, neighbor_node_num=nn)
+    tm = TopoMap.build(descs, np.arange(m), loops, params)
+    tm.set_status("n0", "n8", "confirmed")
+    tm.set_status("n4", "n12", "rejected")
+    tm.set_status("n6", "n11", "rejected")
+    return tm
+
+
+def hand_poses() -> Poses:
+    # Poses sampled at the node stamps (2 s apart) plus midpoints, so at() interpolates.
+    t = np.arange(len(POSITIONS)) * 2.0
+    mid_t = t[:-1] + 1.0
+    mid = (POSITIONS[:-1] + POSITIONS[1:]) / 2
+    order = np.argsort(np.concatenate([t, mid_t]))
+    allp = np.concatenate([POSITIONS, mid])[order]
+    return Poses(t=np.concatenate([t, mid_t])[order], x=allp[:, 0], y=allp[:, 1])
+
+
+def test_hand_counted_map():
+    ev = evaluate(hand_map(), hand_poses(), dist_th=1.0)
+    # 13 nodes: (12 * 11) / 2 = 66 pairs once path arcs (j - i == 1) are left out.
+    # Same place (<= 1 m), j - i > neighbor_node_num = 2: (2,6) (1,7) (0,8) (0,9) (4,12).
+    # (3,5) is 0.94 m but only 2 apart: a temporal neighbour, never a positive.
+    # Detected (not rejected): (2,6) TP, (0,8) TP (confirmed), (3,5) FP (neighbours),
+    # (1,10) FP (far apart). Rejected: (4,12) -> still FN, (6,11) -> TN.
+    # FN = positives not detected: (1,7) (0,9) (4,12). TN = 66 - 2 - 2 - 3 = 59.
+    assert (ev.tp, ev.fp, ev.fn, ev.tn) == (2, 2, 3, 59)
+    assert ev.tp_pairs == [(0, 8), (2, 6)]
+    assert sorted(ev.fp_pairs) == [(1, 10), (3, 5)]
+    assert sorted(ev.fn_pairs) == [(0, 9), (1, 7), (4, 12)]
+    assert ev.precision == pytest.approx(2 / 4)
+    assert ev.recall == pytest.approx(2 / 5)
+    assert ev.accuracy == pytest.approx(61 / 66)
+    assert ev.f1 == pytest.approx(4 / 9)
+    # Events: (2,6) (1,7) (0,8) (0,9) touch diagonally (the drive back), one event,
+    # found through its TPs; (4,12) is a second event, its loop was rejected: missed.
+    assert (ev.events_found, ev.events_total) == (1, 2)
+    assert ev.event_coverage == pytest.approx(0.5)
+    assert ev.loop_truth == {("n0", "n8"): "TP", ("n1", "n10"): "FP", ("n2", "n6"): "TP",
+                             ("n3", "n5"): "FP", ("n4", "n12"): "FN", ("n6", "n11"): "TN"}
+    assert ev.neighbor_node_num == 2  # taken from the map's parameters
+    json.dumps(ev.as_dict())
+
+
+def test_other_neighbourhood_and_distance():
+    tm = hand_map()
+    # neighbor_node_num 1: (3,5) is now a positive, and detected -> TP; it touches
+    # (2,6) diagonally, so it joins the first event.
+    ev = evaluate(tm, hand_poses(), dist_th=1.0, neighbor_node_num=1)
+    assert (ev.tp, ev.fp, ev.fn, ev.tn) == (3, 1, 3, 59)
+    assert (ev.events_found, ev.events_total) == (1, 2)
+    # 0.35 m: positives only (1,7) 0.3 m and (4,12) 0.22 m, neither detected; the four
+    # detected loops are all FP.
+    ev = evaluate(tm, hand_poses(), dist_th=0.35)
+    assert (ev.tp, ev.fp, ev.fn, ev.tn) == (0, 4, 2, 60)
+    assert ev.precision == 0.0 and ev.recall == 0.0 and ev.f1 == 0.0
+    assert (ev.events_found, ev.events_total) == (0, 2)
+
+
+def test_positions_from_node_attributes():
+    tm = hand_map()
+    with pytest.raises(InputError, match="no ground-truth poses"):
+        evaluate(tm)
+    tm.set_positions(POSITIONS[:, 0], POSITIONS[:, 1])
+    ev = evaluate(tm)
+    assert (ev.tp, ev.fp, ev.fn, ev.tn) == (2, 2, 3, 59)
+
+
+def brute_events(positives: set, found: set) -> tuple[int, int]:
+    """Union-find over positive pairs touching in the 8-neighbourhood of the (i, j) grid."""
+    parent = {p: p for p in positives}
+
+    def root(p):
+        while parent[p] != p:
+            p = parent[p]
+        return p
+
+    for i, j in positives:
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                q = (i + di, j + dj)
+                if q in parent:
+                    parent[root(q)] = root((i, j))
+    roots = {root(p) for p in positives}
+    return len({root(p) for p in found}), len(roots)
+
+
+def brute_force(x, y, detected, th, nn):
+    m = len(x)
+    tp = fp = fn = tn = 0
+    for i in range(m):
+        for j in range(i + 2, m):
+            same = np.hypot(x[i] - x[j], y[i] - y[j]) <= th
+            positive = same and j - i > nn
+            det = (i, j) in detected
+            if det and positive:
+                tp += 1
+            elif det:
+                fp += 1
+            elif positive:
+                fn += 1
+            else:
+                tn += 1
+    return tp, fp, fn, tn
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_matches_brute_force_on_random_maps(seed, monkeypatch):
+    import engine.evaluate as evmod
+
+    monkeypatch.setattr(evmod, "_BLOCK_ELEMENTS", 50)  # force many row blocks
+    rng = np.random.default_rng(seed)
+    m = 60
+    xy = np.cumsum(rng.normal(size=(m, 2)), axis=0) * 0.4  # a wandering robot
+    v = rng.normal(size=(m, 4)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    descs = Descriptors(np.arange(m, dtype=float), np.arange(m), np.zeros(m, np.int64), v, {})
+    pairs = {(int(a), int(b)) for a, b in rng.integers(0, m, size=(80, 2)) if b - a >= 2}
+    loops = [LoopCandidate(a, b, 0.5, 0) for a, b in sorted(pairs)]
+    tm = TopoMap.build(descs, np.arange(m), loops, MapParams(loop_sim_th=0.5, node_sim_th=0.8))
+    tm.set_positions(xy[:, 0], xy[:, 1])
+    ev = evaluate(tm, dist_th=1.0, neighbor_node_num=3)
+    assert (ev.tp, ev.fp, ev.fn, ev.tn) == brute_force(xy[:, 0], xy[:, 1], pairs, 1.0, 3)
+    positives = {(i, j) for i in range(m) for j in range(i + 4, m)
+                 if np.hypot(*(xy[i] - xy[j])) <= 1.0}
+    assert positives, "the wandering robot comes back somewhere"
+    assert (ev.events_found, ev.events_total) == brute_events(positives, set(ev.tp_pairs))
