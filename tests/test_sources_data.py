@@ -1,7 +1,7 @@
 """Test data shared by the source and writer tests (no tests here).
 
-Frames are smooth random colour fields plus a frame-number code (a bright bar
-whose column depends on the frame number), so frames are distinguishable even
+Frames are a smooth random colour field, rolled a few columns per frame, plus
+a frame-number code (a bright bar whose column depends on the frame number), so frames are distinguishable even
 after lossy coding.
 """
 
@@ -18,10 +18,12 @@ W, H = 128, 64
 
 def make_frames(n: int, w: int = W, h: int = H, seed: int = 0) -> list[np.ndarray]:
     rng = np.random.default_rng(seed)
+    coarse = rng.integers(30, 220, size=(h // 16, w // 16, 3)).astype(np.uint8)
+    base = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
     frames = []
     for k in range(n):
-        coarse = rng.integers(30, 220, size=(h // 8, w // 8, 3)).astype(np.uint8)
-        rgb = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC)
+        # The view turns a little each frame, as a panorama does when the robot turns.
+        rgb = np.roll(base, 3 * k, axis=1)
         col = (k * 7) % (w - 8)
         rgb[:, col:col + 8] = 255 - rgb[:, col:col + 8] // 4
         frames.append(rgb)
