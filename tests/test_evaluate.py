@@ -166,3 +166,51 @@ def test_matches_brute_force_on_random_maps(seed, monkeypatch):
                  if np.hypot(*(xy[i] - xy[j])) <= 1.0}
     assert positives, "the wandering robot comes back somewhere"
     assert (ev.events_found, ev.events_total) == brute_events(positives, set(ev.tp_pairs))
+
+
+def square_route_map(method: str = "ours"):
+    """A robot drives a 20 m square one and a half times; descriptors depend on position."""
+    rng = np.random.default_rng(1)
+    s = np.arange(0, 120, 1.0)  # one node per metre
+    side = (s % 80) // 20
+    f = (s % 20)
+    x = np.select([side == 0, side == 1, side == 2, side == 3], [f, 20 + 0 * f, 20 - f, 0 * f])
+    y = np.select([side == 0, side == 1, side == 2, side == 3], [0 * f, f, 20 + 0 * f, 20 - f])
+    x = x + rng.normal(scale=0.2, size=s.size)
+    y = y + rng.normal(scale=0.2, size=s.size)
+    w = rng.normal(scale=0.35, size=(2, 64))
+    phase = rng.uniform(0, 2 * np.pi, 64)
+    v = np.cos(np.c_[x, y] @ w + phase) + 0.1 * rng.normal(size=(s.size, 64))
+    v = (v / np.linalg.norm(v, axis=1, keepdims=True)).astype(np.float32)
+    descs = Descriptors(s.copy(), np.arange(s.size) * 30, np.zeros(s.size, np.int64), v,
+                        {"descriptor": "fourier"})
+    params = MapParams(method=method, node_sim_th=0.8, loop_sim_th=0.75, window_size=5,
+                       count_th=2, neighbor_node_num=5)
+    from engine.loops import detect_loops
+
+    loops = detect_loops(v, params)
+    tm = TopoMap.build(descs, np.arange(s.size), loops, params)
+    return tm, Poses(t=s, x=x, y=y)
+
+
+@pytest.mark.parametrize("with_poses", [True, False])
+def test_plot_map_writes_a_png(tmp_path, with_poses):
+    from engine.plots import plot_map
+
+    tm, poses = square_route_map("simple")
+    ev = evaluate(tm, poses)
+    assert ev.tp > 0 and ev.fp > 0  # the picture has both colours to show
+    path = tmp_path / "map.png"
+    plot_map(tm, poses if with_poses else None, ev if with_poses else None, path)
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(path)
+    assert img.shape[0] == 600 and img.shape[1] == 1300
+    if with_poses:
+        # Green (TP) and red (FP) loop lines are drawn somewhere.
+        rgb = img[..., :3]
+        green = (rgb[..., 1] > 0.45) & (rgb[..., 0] < 0.35) & (rgb[..., 2] < 0.35)
+        red = (rgb[..., 0] > 0.7) & (rgb[..., 1] < 0.3) & (rgb[..., 2] < 0.3)
+        assert green.sum() > 50 and red.sum() > 50
