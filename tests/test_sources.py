@@ -30,6 +30,7 @@ from test_sources_data import (
     make_frames,
     make_stamps,
     mean_abs_error,
+    ros1_compressed,
     ros1_image,
     write_messages_bag,
 )
@@ -203,8 +204,6 @@ def test_bag_compressed(tmp_path, frames, fmt, max_err):
 
 
 def test_grey_compressed_image(tmp_path, frames):
-    from test_sources_data import ros1_compressed
-
     gray = cv2.cvtColor(frames[0], cv2.COLOR_RGB2GRAY)
     png = cv2.imencode(".png", gray)[1].tobytes()
     path = write_messages_bag(tmp_path / "g.bag", [("/cam", 1.0, ros1_compressed(png, 1.0))])
