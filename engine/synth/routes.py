@@ -85,7 +85,7 @@ def trajectory_from_waypoints(waypoints, speed: float, fps: float,
             length += seg
         elif kind == "arc":
             seg = abs(p[1] * p[3])
-            durations.append(seg / speed)
+            durations.append(max(seg / speed, abs(p[3]) / SPIN_RATE))   # tight arcs: turn rate cap
             length += seg
         else:
             durations.append(abs(p[2]) / SPIN_RATE)
@@ -144,7 +144,7 @@ def _reverse(look: str):
     L, M = 30.0 * _scale(look), 12.0 * _scale(look)
     corridors = [Corridor(0, 0, L, 0), Corridor(L, 0, L, M)]
     wps = [(0, 0), (L, 0), (L, M), (L, 0), (0, 0)]
-    return corridors, wps, _along([(2, 0), (L, 0), (L, M - 1)], 5.0)
+    return corridors, wps, _along([(2, 0), (L, 0), (L, M - 4)], 5.0)   # not at the turn itself
 
 
 def _offset(look: str):
@@ -152,11 +152,11 @@ def _offset(look: str):
     off = 0.8
     corridors = [Corridor(0, 0, L, 0)]
     wps = [(0, -off / 2), (L - 1.5, -off / 2), (L - 1.5, off / 2), (0, off / 2)]
-    return corridors, wps, _along([(1, 0), (L - 3, 0)], 5.0)
+    return corridors, wps, _along([(1, 0), (L - 5, 0)], 5.0)
 
 
 def _loop(look: str):
-    W, H = 20.0 * _scale(look), 12.0 * _scale(look)
+    W, H = 16.0 * _scale(look), 10.0 * _scale(look)
     corridors = [Corridor(0, 0, W, 0), Corridor(W, 0, W, H), Corridor(W, H, 0, H), Corridor(0, H, 0, 0)]
     lap = [(W, 0), (W, H), (0, H), (0, 0)]
     wps = [(2, 0)] + lap + lap + [(W - 2, 0)]
@@ -167,7 +167,7 @@ def _demo(look: str):
     L = 12.0 if look == "indoor" else 14.0   # streets are wider: keep the blocks > 2 m
     corridors = [Corridor(-L, 0, L, 0), Corridor(0, -L, 0, L), Corridor(L, 0, L, L), Corridor(0, L, L, L)]
     wps = [(-L, 0), (L, 0), (L, L), (0, L), (0, -L), (0, -L / 3)]
-    revisits = [(0.0, 0.0)] + _along([(0, -L / 3 - 1), (0, -L)], 3.0)
+    revisits = [(0.0, 0.0)] + _along([(0, -L / 3 - 0.5), (0, -L + 4)], 2.0)
     return corridors, wps, revisits
 
 
