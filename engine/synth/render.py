@@ -105,12 +105,13 @@ def _ground(world: World, gx: np.ndarray, gy: np.ndarray, foot_m: np.ndarray) ->
     # Ground maps (material, shade) on the occupancy grid, bilinear via a 2-channel lookup.
     gi = (gy - world.ground_origin[1]) / world.ground_cell
     gj = (gx - world.ground_origin[0]) / world.ground_cell
-    maps = np.stack([world.ground_material, world.ground_shade, np.zeros_like(world.ground_shade)], -1)
+    maps = np.stack([world.ground_material, world.ground_shade, world.ground_paint], -1)
     gm = _bilinear_float(maps, gi, gj)
-    mat, shade = gm[:, 0:1], gm[:, 1:2]
+    mat, shade, paint = gm[:, 0:1], gm[:, 1:2], gm[:, 2:3]
     if world.look == "outdoor":
         col1 = _bilinear(world.floor_tiles[1], lvl, gy * rho, gx * rho, wrap=True)
         col0 = col0 + (col1 - col0) * mat
+        col0 = col0 + (np.float32(0.9) - col0) * paint
     return col0 * shade
 
 

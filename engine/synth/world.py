@@ -81,6 +81,7 @@ class World:
     ground_cell: float
     ground_material: np.ndarray  # (Gh, Gw) float32 0..1 weight of material 1
     ground_shade: np.ndarray   # (Gh, Gw) float32 brightness multiplier (dark near walls)
+    ground_paint: np.ndarray   # (Gh, Gw) float32 0..1 white road marking
     camera_height: float
     ceiling_height: float      # indoor only; outdoor: inf
     haze: np.ndarray           # (3,) float32 colour of far distance
@@ -496,6 +497,7 @@ def build_world(corridors: list[Corridor], look: str, seed: int, *,
 
     # Ground maps on the occupancy grid: sidewalks near buildings, darker floor near walls.
     dist = cv2.distanceTransform(free.astype(np.uint8), cv2.DIST_L2, 5) * CELL
+    paint = np.zeros_like(dist, np.float32)
     if indoor:
         material = np.zeros_like(dist, np.float32)
         gshade = 1.0 - 0.3 * np.exp(-dist / 0.35)
@@ -504,6 +506,8 @@ def build_world(corridors: list[Corridor], look: str, seed: int, *,
         gshade = 1.0 - 0.35 * np.exp(-dist / 0.6)
         kerb = (dist >= 2.5) & (dist < 2.5 + CELL)
         gshade = np.where(kerb, 0.75, gshade)
+        # Lane edge lines 0.7 m off the kerb (away from the robot, which drives mid-street).
+        paint = (np.abs(dist - 3.3) < 0.15).astype(np.float32) * 0.8
     walk = []
     for c in corridors:
         walk.append((c.x0, c.y0, c.x1, c.y1, 0.7 if indoor else 3.5))
@@ -513,6 +517,7 @@ def build_world(corridors: list[Corridor], look: str, seed: int, *,
         floor_rho=floor_rho, floor_tiles=tiles, ceiling_rho=40.0, ceiling_tile=ceiling,
         sky=_sky(rng), ground_origin=origin, ground_cell=CELL,
         ground_material=material.astype(np.float32), ground_shade=gshade.astype(np.float32),
+        ground_paint=paint,
         camera_height=1.2, ceiling_height=ceiling_height if indoor else np.inf,
         haze=np.float32([0.8, 0.85, 0.9]), haze_distance=np.inf if indoor else 120.0,
         lighting_drift=lighting_drift, noise=noise, walk_lines=walk,
