@@ -382,3 +382,29 @@ def test_positional_interpolation_follows_the_official_hub_settings(backbone):
             ref = F.interpolate(grid, scale_factor=(4.1 / 37, 8.1 / 37), mode="bicubic")
         got = model.interpolate_pos_encoding(4, 8)[:, 1:].reshape(1, 4, 8, 384).permute(0, 3, 1, 2)
     assert torch.allclose(got, ref, atol=1e-6)
+
+
+def test_cli_map_and_describe_with_anyloc_vlad(ckpt, tmp_path):
+    import cv2
+    import networkx as nx
+
+    from engine.cli import main
+
+    video = tmp_path / "rec.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (128, 64))
+    base = images(1)[0]
+    for i in range(40):  # 4 s at 10 fps -> 4 sampled frames
+        writer.write(np.roll(base, 3 * i, axis=1)[:, :, ::-1])
+    writer.release()
+    common = ["--descriptor", "anyloc-vlad", "--weights", ckpt, "--backbone", "vits14",
+              "--input-height", str(H), "--no-cache", "-q"]
+    npz = tmp_path / "d.npz"
+    assert main(["describe", str(video), "-o", str(npz), *common]) == 0
+    with np.load(npz) as z:
+        d = z["descriptors"]
+    assert d.shape == (4, 32 * 384) and d.dtype == np.float32
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
+    out = tmp_path / "map.graphml"
+    assert main(["map", str(video), "-o", str(out), *common]) == 0
+    graph = nx.read_graphml(out)
+    assert graph.graph["descriptor"] == "anyloc-vlad" and graph.number_of_nodes() >= 1

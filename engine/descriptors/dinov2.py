@@ -320,7 +320,7 @@ def check_state_dict(model: DinoVisionTransformer, state: dict, where: str) -> N
     if problem is None:
         return
     guess = _guess_arch(state)
-    hint = f"; it looks like {guess.label}: use backbone {guess.key}" if guess and guess != arch else ""
+    hint = f"; it looks like {guess.label}: use --backbone {guess.key}" if guess and guess != arch else ""
     raise InputError(f"{where}: not a DINOv2 {arch.label} checkpoint ({problem}){hint}")
 
 
