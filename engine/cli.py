@@ -177,13 +177,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     _say(args, "rendering the demo route (synthetic 360-degree recording)...")
-    rec = make_recording(route="demo", look=args.look, seed=args.seed)
+    rec = make_recording(route="demo", look=args.look, seed=args.seed, width=args.width, height=args.width // 2)
     written = write_recording(rec, out)
     for kind, path in written.items():
         _say(args, f"  {kind:14s} {path}")
     bar = _Bar(args.quiet)
     try:
-        descs = describe(written["video"], DescribeSettings(interval=args.interval), progress=bar, cache=None)
+        options = {"input_height": args.input_height} if args.input_height else {}
+        descs = describe(written["video"], DescribeSettings(interval=args.interval, options=options),
+                         progress=bar, cache=None)
     finally:
         bar.close()
     topomap = build_map(descs, MapParams(), source=str(written["video"]))
@@ -232,10 +234,13 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="panotopo", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"panotopo {__version__}")
+    # -q works before or after the command name.
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
     parser.add_argument("-q", "--quiet", action="store_true", help="print only errors")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("map", help="build a topological map (GraphML) from a recording")
+    p = sub.add_parser("map", parents=[common], help="build a topological map (GraphML) from a recording")
     p.add_argument("input", help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz")
     p.add_argument("-o", "--output", required=True, help="output .graphml")
     p.add_argument("--method", default="ours", choices=METHODS, help="loop detection method (default: %(default)s)")
@@ -250,14 +255,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)
 
-    p = sub.add_parser("describe", help="compute descriptors and save them as .npz")
+    p = sub.add_parser("describe", parents=[common], help="compute descriptors and save them as .npz")
     p.add_argument("input")
     p.add_argument("-o", "--output", required=True, help="output .npz")
     p.add_argument("--no-shift", action="store_true", help="do not apply the panorama shift")
     _add_sampling(p)
     p.set_defaults(func=cmd_describe)
 
-    p = sub.add_parser("eval", help="evaluate a map against ground-truth poses (the paper's metrics)")
+    p = sub.add_parser("eval", parents=[common], help="evaluate a map against ground-truth poses (the paper's metrics)")
     p.add_argument("map", help="a .graphml written by panotopo")
     p.add_argument("--poses", required=True, help="CSV t,x,y[,yaw] on the map's clock, or a bag")
     p.add_argument("--pose-topic", help="pose topic in a bag")
@@ -266,14 +271,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", help="also write a PNG of the evaluated map")
     p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("demo", help="generate a synthetic recording, map it and evaluate it (offline)")
+    p = sub.add_parser("demo", parents=[common], help="generate a synthetic recording, map it and evaluate it (offline)")
     p.add_argument("--out", default="panotopo-demo", help="output folder (default: %(default)s)")
     p.add_argument("--look", default="indoor", choices=("indoor", "outdoor"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--interval", type=float, default=1.0)
+    p.add_argument("--width", type=int, default=512, help="panorama width in pixels (height = width / 2)")
+    p.add_argument("--input-height", type=int, help="descriptor input height (default: the descriptor's)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("gui", help="open the desktop app")
+    p = sub.add_parser("gui", parents=[common], help="open the desktop app")
     p.add_argument("input", nargs="?", help="a recording, a descriptors .npz or a session file")
     p.add_argument("--screenshot", help="load INPUT, run the engine, save a picture of the window and exit")
     p.set_defaults(func=cmd_gui)

@@ -103,8 +103,11 @@ class FrameSource(ABC):
         self.close()
 
 
-def open_source(path: str | Path, topic: Optional[str] = None) -> FrameSource:
-    """Open any supported recording; raises InputError with a clear reason."""
+def open_source(path: str | Path, topic: Optional[str] = None, interval: float = 1.0) -> FrameSource:
+    """Open any supported recording; raises InputError with a clear reason.
+
+    ``interval`` spaces the stamps of an image folder that has no stamps.csv.
+    """
     from .sources import open_recording  # sources import this module
 
-    return open_recording(Path(path), topic=topic)
+    return open_recording(Path(path), topic=topic, interval=interval)

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Iterable, Iterator, Optional
 
 import numpy as np
 
 from . import descriptors as descriptor_registry
 from .descriptors.base import Descriptors
 from .errors import InputError
-from .frames import open_source
+from .frames import Frame, open_source
 from .params import MapParams
 from .progress import CancelToken, Progress, check
 
@@ -49,8 +49,8 @@ def describe(
     A descriptors .npz written by ``describe`` is loaded as it is. With ``cache``
     given, a previous result for the same file and settings is reused.
     """
-    from .shift import apply_shift, canonical_shift
     from .descriptors.cache import cache_key
+    from .verify import COLUMNS_VERSION
 
     path = Path(path)
     if is_descriptor_file(path):
@@ -62,30 +62,62 @@ def describe(
     key = None
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
-                        {"shift": settings.shift, **model.settings()})
+                        {"shift": settings.shift, "columns": COLUMNS_VERSION, **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
 
-    with open_source(path, topic=settings.topic) as source:
+    with open_source(path, topic=settings.topic, interval=settings.interval) as source:
         indices = source.sample_indices(settings.interval)
         if indices.size == 0:
             raise InputError(f"{path}: the recording has no frames")
-        stamps: list[float] = []
-        frames: list[int] = []
-        shifts: list[int] = []
+        result = describe_frames(source.frames(settings.interval), int(indices.size), settings,
+                                 model=model, source=str(path), progress=progress, cancel=cancel)
+    if cache is not None and key is not None:
+        cache.store(key, result)
+    return result
 
-        def shifted_images() -> Iterator[np.ndarray]:
-            for frame in source.frames(settings.interval):
-                check(cancel)
-                s = canonical_shift(frame.rgb) if settings.shift else 0
-                stamps.append(frame.stamp)
-                frames.append(frame.index)
-                shifts.append(s)
-                yield apply_shift(frame.rgb, s) if s else frame.rgb
 
-        vectors = model.describe(shifted_images(), count=int(indices.size), progress=progress, cancel=cancel)
+def describe_frames(
+    frames: Iterable[Frame],
+    count: int,
+    settings: DescribeSettings = DescribeSettings(),
+    model=None,
+    source: str = "",
+    progress: Optional[Progress] = None,
+    cancel: Optional[CancelToken] = None,
+) -> Descriptors:
+    """Descriptors of already sampled ``frames`` (the core of ``describe``; also used on
+    in-memory recordings by benchmarks and tests).
 
+    Besides the global vectors it keeps per-column signatures of every shifted frame
+    (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks.
+    """
+    from .shift import apply_shift, canonical_shift
+    from .verify import column_features
+
+    if model is None:
+        model = descriptor_registry.get(settings.descriptor, **settings.options)
+    stamps: list[float] = []
+    indices: list[int] = []
+    shifts: list[int] = []
+    columns: list[np.ndarray] = []
+    frame_width: list[int] = []
+
+    def shifted_images() -> Iterator[np.ndarray]:
+        for frame in frames:
+            check(cancel)
+            s = canonical_shift(frame.rgb) if settings.shift else 0
+            stamps.append(frame.stamp)
+            indices.append(frame.index)
+            shifts.append(s)
+            rgb = apply_shift(frame.rgb, s) if s else frame.rgb
+            columns.append(column_features(rgb))
+            if not frame_width:
+                frame_width.append(int(frame.rgb.shape[1]))
+            yield rgb
+
+    vectors = model.describe(shifted_images(), count=int(count), progress=progress, cancel=cancel)
     meta = {
         "descriptor": settings.descriptor,
         "settings": model.settings(),
@@ -93,18 +125,17 @@ def describe(
         "interval": settings.interval,
         "topic": settings.topic,
         "shift": settings.shift,
-        "source": str(path),
+        "source": source,
+        "frame_width": int(frame_width[0]) if frame_width else 0,   # for yaw from column shifts
     }
-    result = Descriptors(
+    return Descriptors(
         stamps=np.asarray(stamps, np.float64),
-        frames=np.asarray(frames, np.int64),
+        frames=np.asarray(indices, np.int64),
         shifts=np.asarray(shifts, np.int64),
         vectors=np.asarray(vectors, np.float32),
         meta=meta,
+        columns=np.stack(columns).astype(np.float16) if columns else None,
     )
-    if cache is not None and key is not None:
-        cache.store(key, result)
-    return result
 
 
 def descriptor_defaults(descs: Descriptors) -> dict:

@@ -40,13 +40,14 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file or directory")
-    if path.is_dir():
-        if is_ros2_bag_dir(path):
-            return BagSource(path, topic)
-        return FolderSource(path, interval=interval)
     suffix = path.suffix.lower()
-    if suffix in (".bag", ".db3", ".mcap"):
+    is_bag = is_ros2_bag_dir(path) if path.is_dir() else suffix in (".bag", ".db3", ".mcap")
+    if is_bag:
         return BagSource(path, topic)
+    if topic:  # a silently ignored topic would hide a mistyped input path
+        raise InputError(f"{path}: a topic ({topic}) was given, but only ROS bags have topics")
+    if path.is_dir():
+        return FolderSource(path, interval=interval)
     if suffix in VIDEO_SUFFIXES:
         return VideoSource(path)
     raise InputError(

@@ -1,0 +1,173 @@
+"""The panotopo command end to end on a small synthetic recording in every input format."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import igraph
+import networkx as nx
+import numpy as np
+import pytest
+
+from engine.cli import main
+from engine.synth import make_recording, write_recording
+
+FAST = ["--input-height", "64", "-q"]  # a small descriptor input keeps the suite quick
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec")
+    rec = make_recording("reverse", look="indoor", seed=3, width=256, height=128, fps=2.0)
+    return rec, write_recording(rec, out)
+
+
+@pytest.fixture()
+def cache_dir(tmp_path):
+    return ["--cache-dir", str(tmp_path / "cache")]
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label": str}
+EDGE_TYPES = {"kind": str, "similarity": float, "status": str}
+
+
+def check_contract(path: Path, method: str) -> nx.Graph:
+    g = nx.read_graphml(path)
+    assert g.graph["generator"].startswith("panotopo")
+    assert g.graph["method"] == method
+    for key in ("source", "descriptor", "node_sim_th", "loop_sim_th", "window_size", "count_th",
+                "neighbor_node_num"):
+        assert key in g.graph, key
+    assert g.number_of_nodes() > 3
+    for k, (node, attrs) in enumerate(sorted(g.nodes(data=True), key=lambda na: na[1]["index"])):
+        assert node == f"n{k}" and attrs["index"] == k
+        for key, typ in NODE_TYPES.items():
+            assert isinstance(attrs[key], typ), (key, attrs[key])
+    kinds = {a["kind"] for _, _, a in g.edges(data=True)}
+    assert "sequential" in kinds
+    for _, _, attrs in g.edges(data=True):
+        for key, typ in EDGE_TYPES.items():
+            assert isinstance(attrs[key], typ), (key, attrs[key])
+        assert attrs["status"] in ("auto", "confirmed", "manual")
+    # An independent reader agrees on the size.
+    ig = igraph.Graph.Read_GraphML(str(path))
+    assert ig.vcount() == g.number_of_nodes() and ig.ecount() == g.number_of_edges()
+    return g
+
+
+@pytest.mark.parametrize("fmt", ["video", "ros1", "ros2-sqlite3", "ros2-mcap", "folder"])
+def test_map_every_input_format(recording, fmt, tmp_path, cache_dir, capsys):
+    rec, files = recording
+    out = tmp_path / "map.graphml"
+    code, _, err = run_cli(capsys, "map", files[fmt], "-o", out, *FAST, *cache_dir)
+    assert code == 0, err
+    g = check_contract(out, "ours" if "ours" in g_methods() else g_methods()[0])
+    # Node stamps are on the recording's clock and frames are real source frames.
+    stamps = sorted(a["stamp"] for _, a in g.nodes(data=True))
+    assert 0.0 <= stamps[0] < 1.0 and stamps[-1] <= rec.stamps[-1] + 1e-6
+    assert max(a["frame"] for _, a in g.nodes(data=True)) < len(rec)
+
+
+def g_methods():
+    from engine.params import MapParams
+    return [MapParams().method]
+
+
+def test_describe_then_map_from_npz_gives_the_same_map(recording, tmp_path, cache_dir, capsys):
+    _, files = recording
+    npz = tmp_path / "d.npz"
+    code, _, err = run_cli(capsys, "describe", files["video"], "-o", npz, *FAST, *cache_dir)
+    assert code == 0, err
+    with np.load(npz) as z:
+        assert z["stamps"].dtype == np.float64 and z["frames"].dtype == np.int64
+        assert z["shifts"].dtype == np.int64 and z["descriptors"].dtype == np.float32
+        norms = np.linalg.norm(z["descriptors"], axis=1)
+        assert np.allclose(norms, 1.0, atol=1e-4)
+        assert json.loads(str(z["meta"]))["descriptor"] == "effnet-vlad"
+        assert z["shifts"].max() > 0  # the panorama shift was applied
+    a, b = tmp_path / "a.graphml", tmp_path / "b.graphml"
+    for src, out in ((npz, a), (files["video"], b)):
+        code, _, err = run_cli(capsys, "map", src, "-o", out, "--method", "ours", *FAST, *cache_dir)
+        assert code == 0, err
+    ga, gb = nx.read_graphml(a), nx.read_graphml(b)
+    assert sorted(ga.nodes) == sorted(gb.nodes)
+    assert sorted(map(sorted, ga.edges)) == sorted(map(sorted, gb.edges))
+
+
+def test_no_shift_descriptors_have_zero_shifts(recording, tmp_path, cache_dir, capsys):
+    _, files = recording
+    npz = tmp_path / "d.npz"
+    code, _, err = run_cli(capsys, "describe", files["ros1"], "-o", npz, "--no-shift", *FAST, *cache_dir)
+    assert code == 0, err
+    with np.load(npz) as z:
+        assert not z["shifts"].any()
+
+
+def test_map_with_poses_then_eval_json(recording, tmp_path, cache_dir, capsys):
+    rec, files = recording
+    out, plot = tmp_path / "m.graphml", tmp_path / "m.png"
+    code, _, err = run_cli(capsys, "map", files["video"], "-o", out, "--poses", files["poses"],
+                           "--plot", plot, "--method", "shift-simple", *FAST, *cache_dir)
+    assert code == 0, err
+    g = nx.read_graphml(out)
+    assert all(isinstance(a["x"], float) and isinstance(a["y"], float) for _, a in g.nodes(data=True))
+    assert plot.stat().st_size > 10_000
+    code, text, err = run_cli(capsys, "eval", out, "--poses", files["poses"], "--json")
+    assert code == 0, err
+    metrics = json.loads(text)
+    m = g.number_of_nodes()
+    # Every unordered pair except the path arcs is counted exactly once.
+    assert metrics["tp"] + metrics["fp"] + metrics["tn"] + metrics["fn"] == (m - 1) * (m - 2) // 2
+    loops = sum(1 for _, _, a in g.edges(data=True) if a["kind"] == "loop")
+    assert metrics["tp"] + metrics["fp"] == loops
+    # The reverse route comes back along the corridor: some same-place pairs exist.
+    assert metrics["tp"] + metrics["fn"] > 0
+
+
+def test_demo_writes_recording_map_and_plot(tmp_path, capsys):
+    out = tmp_path / "demo"
+    code, text, err = run_cli(capsys, "demo", "--out", out, "--width", "256", "--input-height", "64")
+    assert code == 0, err
+    for name in ("demo.mp4", "demo.bag", "poses.csv", "demo.graphml", "demo_map.png"):
+        assert (out / name).exists(), name
+    assert (out / "demo_ros2_sqlite3").is_dir() and (out / "demo_ros2_mcap").is_dir()
+    assert "precision" in text and "demo.graphml" in text
+    g = nx.read_graphml(out / "demo.graphml")
+    assert all("x" in a for _, a in g.nodes(data=True))
+
+
+@pytest.mark.parametrize("argv, reason", [
+    (["map", "{missing}", "-o", "{out}"], "no such file"),
+    (["map", "{text}", "-o", "{out}"], ""),
+    (["map", "{video}", "-o", "{out}", "--descriptor", "nope"], "unknown descriptor"),
+    (["map", "{video}", "-o", "{out}", "--topic", "/nope"], ""),
+    (["eval", "{text}", "--poses", "{poses}"], ""),
+    (["map", "{ros1}", "-o", "{out}", "--topic", "/nope"], "/nope"),
+])
+def test_bad_input_is_one_line_and_nonzero(recording, tmp_path, argv, reason, capsys):
+    _, files = recording
+    text = tmp_path / "notes.mp4"
+    text.write_text("this is not a video\n")
+    subst = {"missing": tmp_path / "missing.mp4", "out": tmp_path / "o.graphml", "text": text,
+             "video": files["video"], "poses": files["poses"], "ros1": files["ros1"]}
+    args = [a.format(**{k: str(v) for k, v in subst.items()}) for a in argv]
+    code, _, err = run_cli(capsys, *args)
+    assert code != 0
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("panotopo: error:"), err
+    assert reason.lower() in lines[0].lower()
+    assert "Traceback" not in err
+
+
+def test_real_process_exit_status_and_no_traceback(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "engine", "map", str(tmp_path / "nothing.bag"),
+                          "-o", str(tmp_path / "x.graphml")], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0 and "no such file" in out.stderr.lower()
