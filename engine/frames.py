@@ -88,6 +88,11 @@ class FrameSource(ABC):
     def sample_indices(self, interval: float = 1.0) -> np.ndarray:
         return sample_indices(self.stamps(), interval)
 
+    def expected_samples(self, interval: float = 1.0) -> int:
+        """How many frames ``frames(interval)`` yields (an estimate where knowing it
+        exactly costs a pass over the recording; used for progress only)."""
+        return int(self.sample_indices(interval).size)
+
     def frames(self, interval: float = 1.0) -> Iterator[Frame]:
         """Frames sampled every ``interval`` seconds, in order."""
         for i in self.sample_indices(interval):

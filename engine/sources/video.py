@@ -100,6 +100,16 @@ class VideoSource(FrameSource):
             stamps = np.arange(stamps.size, dtype=np.float64) / self.fps
         return stamps
 
+    def expected_samples(self, interval: float = 1.0) -> int:
+        """From the container's frame count and rate while the stamps are unknown,
+        so that describing a video decodes it once, not twice."""
+        frames = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        if self._stamps is not None or frames <= 0 or self.fps <= 0:
+            return super().expected_samples(interval)
+        if interval <= 0:
+            return frames
+        return int(((frames - 1) / self.fps + EPS) // interval) + 1
+
     @property
     def frame_count(self) -> int:
         return int(self.stamps().size)
