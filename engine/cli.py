@@ -1,4 +1,4 @@
-"""The ``panotopo`` command: map, describe, eval, demo, gui.
+"""The ``panotopo`` command: map, describe, eval, demo (the desktop app adds gui).
 
 Bad input ends with one line on stderr and a non-zero exit status, never a traceback.
 """
@@ -9,7 +9,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 from . import __version__
 from .errors import Cancelled, PanotopoError
@@ -202,12 +202,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_gui(args: argparse.Namespace) -> int:
-    from gui.app import run
-
-    return run(args.input, args.screenshot)
-
-
 # ----------------------------------------------------------------------------- parser
 
 def _add_sampling(p: argparse.ArgumentParser) -> None:
@@ -231,8 +225,13 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cache-dir", help="descriptor cache folder (default: $PANOTOPO_CACHE or ~/.cache/panotopo)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="panotopo", description=__doc__.splitlines()[0])
+# (subparsers, common parent parser) -> None: adds one command.
+AddCommand = Callable[[argparse._SubParsersAction, argparse.ArgumentParser], None]
+
+
+def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="panotopo", description="Topological maps from 360-degree recordings (panorama shift + place recognition).")
     parser.add_argument("--version", action="version", version=f"panotopo {__version__}")
     # -q works before or after the command name.
     common = argparse.ArgumentParser(add_help=False)
@@ -280,15 +279,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--input-height", type=int, help="descriptor input height (default: the descriptor's)")
     p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("gui", parents=[common], help="open the desktop app")
-    p.add_argument("input", nargs="?", help="a recording, a descriptors .npz or a session file")
-    p.add_argument("--screenshot", help="load INPUT, run the engine, save a picture of the window and exit")
-    p.set_defaults(func=cmd_gui)
+    for add_command in extra_commands:
+        add_command(sub, common)
     return parser
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    parser = build_parser()
+def main(argv: Optional[Sequence[str]] = None, extra_commands: Sequence[AddCommand] = ()) -> int:
+    """Run the command line; ``extra_commands`` lets a higher layer (the desktop app's
+    ``gui`` command) plug in without the engine ever importing it."""
+    parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
