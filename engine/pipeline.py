@@ -68,10 +68,8 @@ def describe(
             return hit
 
     with open_source(path, topic=settings.topic, interval=settings.interval) as source:
-        indices = source.sample_indices(settings.interval)
-        if indices.size == 0:
-            raise InputError(f"{path}: the recording has no frames")
-        result = describe_frames(source.frames(settings.interval), int(indices.size), settings,
+        expected = source.expected_samples(settings.interval)
+        result = describe_frames(source.frames(settings.interval), expected, settings,
                                  model=model, source=str(path), progress=progress, cancel=cancel)
     if cache is not None and key is not None:
         cache.store(key, result)
@@ -118,6 +116,8 @@ def describe_frames(
             yield rgb
 
     vectors = model.describe(shifted_images(), count=int(count), progress=progress, cancel=cancel)
+    if not stamps:
+        raise InputError(f"{source or 'input'}: the recording has no frames")
     meta = {
         "descriptor": settings.descriptor,
         "settings": model.settings(),

@@ -3,6 +3,9 @@
 The .npz contract (DESIGN.md): ``stamps`` float64 (n,), ``frames`` int64 (n,),
 ``shifts`` int64 (n,), ``descriptors`` float32 (n, d) L2-normalised rows,
 ``meta`` a JSON string (descriptor name, parameters).
+Added key (optional): ``columns`` float16 (n, W', F), per-column signatures of the
+shifted frames for yaw-aligned verification (``engine.verify``). Files without it
+still load (``columns`` is then None).
 """
 
 from __future__ import annotations
@@ -26,9 +29,14 @@ class Descriptors:
     shifts: np.ndarray    # int64 (n,) columns rolled by the panorama shift (0 without shift)
     vectors: np.ndarray   # float32 (n, d), rows L2-normalised
     meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
+    columns: Optional[np.ndarray] = None  # float16 (n, W', F) column signatures, when computed
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
+
+    def optional_arrays(self) -> dict:
+        """The added, optional .npz keys that are set (for writers of the file)."""
+        return {} if self.columns is None else {"columns": np.asarray(self.columns, np.float16)}
 
     def save(self, path: str | Path) -> None:
         path = Path(path)
@@ -40,6 +48,7 @@ class Descriptors:
             shifts=np.asarray(self.shifts, np.int64),
             descriptors=np.asarray(self.vectors, np.float32),
             meta=np.array(json.dumps(self.meta)),
+            **self.optional_arrays(),
         )
         tmp.replace(path)  # atomic: a crash never leaves half a file
 
@@ -57,6 +66,7 @@ class Descriptors:
                     shifts=z["shifts"].astype(np.int64),
                     vectors=z["descriptors"].astype(np.float32),
                     meta=json.loads(str(z["meta"])),
+                    columns=z["columns"].astype(np.float16) if "columns" in z.files else None,
                 )
         except InputError:
             raise
@@ -67,6 +77,8 @@ class Descriptors:
         n = len(d.stamps)
         if d.vectors.ndim != 2 or not (len(d.frames) == len(d.shifts) == d.vectors.shape[0] == n):
             raise InputError(f"{path}: descriptors file has inconsistent array lengths")
+        if d.columns is not None and (d.columns.ndim != 3 or d.columns.shape[0] != n):
+            raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
         return d
 
 

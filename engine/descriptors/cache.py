@@ -77,7 +77,7 @@ class DescriptorCache:
         vectors = np.asarray(descs.vectors)
         if vectors.ndim == 2 and vectors.shape[1] >= FLOAT16_FROM_DIM:
             vectors = vectors.astype(np.float16)
-        compact = Descriptors(descs.stamps, descs.frames, descs.shifts, vectors, descs.meta)
+        compact = Descriptors(descs.stamps, descs.frames, descs.shifts, vectors, descs.meta, descs.columns)
         path = self.path_for(key)
         _save_keep_dtype(compact, path)
         return path
@@ -98,5 +98,6 @@ def _save_keep_dtype(descs: Descriptors, path: Path) -> None:
         shifts=np.asarray(descs.shifts, np.int64),
         descriptors=descs.vectors,
         meta=np.array(json.dumps(descs.meta)),
+        **descs.optional_arrays(),
     )
     tmp.replace(path)

@@ -1,0 +1,182 @@
+"""Methods benchmark on synthetic routes: the harness shared by benchmarks/ and tests/.
+
+A benchmark case is one synthetic recording (route, look, seed, people, lighting,
+noise). Each recording is rendered once, described once per panorama-shift setting
+(cached as .npz when a cache folder is given), and then mapped by every method from
+the same descriptors; each map is scored against the ground-truth poses with
+``engine.evaluate`` (the paper's TP/FP/TN/FN plus revisit events).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Iterable, Optional
+
+import numpy as np
+
+from .descriptors.base import Descriptors
+from .evaluate import evaluate
+from .frames import Frame
+from .params import METHODS, SHIFTED_METHODS, MapParams
+from .pipeline import DescribeSettings, build_map, describe_frames
+from .poses import Poses
+from .synth import make_recording
+from .synth.routes import make_route
+
+# Recordings are rendered at one frame per second, so sampling every 1.0 s keeps them all.
+FPS = 1.0
+
+
+@dataclass(frozen=True)
+class Case:
+    route: str
+    look: str
+    seed: int = 0
+    people: int = 0
+    lighting_drift: float = 0.0
+    noise: float = 0.0
+    width: int = 256
+
+    @property
+    def name(self) -> str:
+        extra = f"_p{self.people}_l{self.lighting_drift:g}_n{self.noise:g}" if (
+            self.people or self.lighting_drift or self.noise) else ""
+        return f"{self.route}_{self.look}_s{self.seed}_w{self.width}{extra}"
+
+    def poses(self) -> Poses:
+        """Ground truth without rendering (the trajectory alone is cheap)."""
+        tr = make_route(self.route, self.look, self.seed, fps=FPS, people=self.people,
+                        lighting_drift=self.lighting_drift, noise=self.noise).trajectory
+        return Poses(t=tr.t.astype(np.float64), x=tr.x.copy(), y=tr.y.copy(), yaw=tr.yaw.copy())
+
+
+@dataclass
+class Described:
+    case: Case
+    by_shift: dict            # {True: Descriptors, False: Descriptors}
+    poses: Poses
+    frames_per_second: dict = field(default_factory=dict)  # extraction speed per shift setting
+
+
+def describe_case(case: Case, shifts: Iterable[bool] = (True, False), input_height: int = 128,
+                  descriptor: str = "effnet-vlad", cache_dir: Optional[Path] = None) -> Described:
+    """Render ``case`` and describe it once per shift setting (cached under ``cache_dir``)."""
+    shifts = tuple(shifts)
+    by_shift: dict = {}
+    fps: dict = {}
+    rec = None
+    for shift in shifts:
+        path = None
+        if cache_dir is not None:
+            path = Path(cache_dir) / f"{case.name}_{descriptor}_h{input_height}_{'shift' if shift else 'noshift'}.npz"
+            if path.is_file():
+                d = Descriptors.load(path)
+                by_shift[shift] = d
+                fps[shift] = float(d.meta.get("bench_fps", 0.0))
+                continue
+        if rec is None:
+            rec = make_recording(case.route, case.look, case.seed, width=case.width, height=case.width // 2,
+                                 fps=FPS, people=case.people, lighting_drift=case.lighting_drift,
+                                 noise=case.noise)
+        settings = DescribeSettings(descriptor=descriptor, interval=1.0 / FPS, shift=shift,
+                                    options={"input_height": input_height})
+        frames = (Frame(k, float(t), rgb) for k, (t, rgb) in enumerate(zip(rec.stamps, rec.frames)))
+        t0 = time.perf_counter()
+        d = describe_frames(frames, len(rec), settings, source=case.name)
+        fps[shift] = len(rec) / max(time.perf_counter() - t0, 1e-9)
+        d.meta["bench_fps"] = fps[shift]
+        by_shift[shift] = d
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            d.save(path)
+    return Described(case, by_shift, case.poses(), fps)
+
+
+@dataclass
+class Row:
+    route: str
+    look: str
+    seed: int
+    method: str
+    nodes: int
+    tp: int
+    fp: int
+    tn: int
+    fn: int
+    precision: float
+    recall: float
+    accuracy: float
+    f1: float
+    events_found: int
+    events_total: int
+    extraction_fps: float
+    people: int = 0
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
+                     params: Optional[dict] = None, eval_nn: int = 5) -> list[Row]:
+    """Map ``described`` with every method and score each map.
+
+    ``params`` maps a method to the MapParams used for it (default ``MapParams(method=m)``).
+    ``eval_nn``: temporal neighbours (in nodes) never counted as positives, the same for
+    every method so the tables compare like with like.
+    """
+    rows = []
+    case = described.case
+    for method in methods:
+        p = (params or {}).get(method) or MapParams()
+        p = replace(p, method=method)
+        shift = method in SHIFTED_METHODS or method not in ("simple",)
+        descs = described.by_shift[shift]
+        topomap = build_map(descs, p)
+        ev = evaluate(topomap, described.poses, neighbor_node_num=eval_nn)
+        rows.append(Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
+                        ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
+                        ev.events_total, float(described.frames_per_second.get(shift, 0.0)),
+                        case.people))
+    return rows
+
+
+def evaluate_route(route: str, look: str, seed: int = 0, methods: Iterable[str] = METHODS,
+                   cache_dir: Optional[Path] = None, input_height: int = 128, width: int = 256,
+                   params: Optional[dict] = None, **case_options) -> list[Row]:
+    """Render, describe and map one route with every method: rows of the results table."""
+    methods = tuple(methods)
+    case = Case(route, look, seed, width=width, **case_options)
+    shifts = sorted({m != "simple" for m in methods}, reverse=True)
+    described = describe_case(case, shifts, input_height=input_height, cache_dir=cache_dir)
+    return evaluate_methods(described, methods, params)
+
+
+def sum_rows(rows: list[Row], method: str) -> dict:
+    """Totals over rows of one method (pair counts, events) with ratios recomputed."""
+    sel = [r for r in rows if r.method == method]
+    tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total")}
+    tp, fp, fn = tot["tp"], tot["fp"], tot["fn"]
+    tot["precision"] = tp / (tp + fp) if tp + fp else 0.0
+    tot["recall"] = tp / (tp + fn) if tp + fn else 0.0
+    tot["f1"] = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else 0.0
+    tot["runs"] = len(sel)
+    return tot
+
+
+def markdown_table(rows: list[Row]) -> str:
+    """Rows as a Markdown table in the layout of the paper's Tables II-V."""
+    head = ("| route | look | seed | method | nodes | TP | FP | TN | FN | precision | recall | "
+            "accuracy | F1 | events | extraction fps |")
+    lines = [head, "|" + "---|" * 15]
+    for r in rows:
+        lines.append(f"| {r.route} | {r.look} | {r.seed} | {r.method} | {r.nodes} | {r.tp} | {r.fp} | "
+                     f"{r.tn} | {r.fn} | {r.precision:.3f} | {r.recall:.3f} | {r.accuracy:.4f} | "
+                     f"{r.f1:.3f} | {r.events_found}/{r.events_total} | {r.extraction_fps:.1f} |")
+    return "\n".join(lines)
+
+
+def rows_json(rows: list[Row]) -> str:
+    return json.dumps([r.as_dict() for r in rows], indent=1)

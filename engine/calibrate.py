@@ -1,0 +1,105 @@
+"""Thresholds that transfer: calibrate similarities from the recording itself.
+
+Absolute cosine thresholds are tied to one descriptor and one kind of scene. Here each
+similarity is instead measured against what "a different place" looks like in the same
+recording: for every node, the similarities to temporally distant nodes are almost all
+different places (revisits are a few per node at most), so their robust centre and
+spread (median and MAD) define a per-node background. A pair's z-score
+
+    z(i, j) = (S[i, j] - (mu_i + mu_j) / 2) / sqrt((sd_i^2 + sd_j^2) / 2)
+
+says how many background spreads the pair stands out, which means the same for the
+embedded descriptor, AnyLoc, indoor or outdoor. The same is done for verification
+scores (``robust_stats`` on a sample of distant pairs).
+
+Node threshold: consecutive samples of a moving robot are the reference for "one step
+apart"; a frame is merged into the current node only when it is clearly more similar
+than a typical step (half-way from the median step similarity to 1).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+# Columns sampled per row for the background statistics (enough for a stable median).
+_SAMPLE = 384
+# MAD to standard deviation for a normal distribution.
+_MAD_TO_SD = 1.4826
+
+
+def robust_stats(values: np.ndarray, axis: int = -1) -> tuple[np.ndarray, np.ndarray]:
+    """Median and MAD-based spread along ``axis`` (NaNs ignored); spread floored at 1e-3."""
+    med = np.nanmedian(values, axis=axis)
+    mad = np.nanmedian(np.abs(values - np.expand_dims(med, axis)), axis=axis)
+    return med, np.maximum(mad * _MAD_TO_SD, 1e-3)
+
+
+def background(sims: np.ndarray, exclude: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-row (mu, sd) of similarities to nodes more than ``exclude`` apart in time.
+
+    Uses a fixed random sample of at most ``_SAMPLE`` columns, so it stays cheap for
+    thousands of nodes. Rows with no distant node get the global statistics.
+    """
+    m = sims.shape[0]
+    rng = np.random.default_rng(seed)
+    cols = np.arange(m) if m <= _SAMPLE else np.sort(rng.choice(m, _SAMPLE, replace=False))
+    block = sims[:, cols].astype(np.float32, copy=True)
+    near = np.abs(np.arange(m)[:, None] - cols[None, :]) <= exclude
+    block[near] = np.nan
+    with np.errstate(all="ignore"):
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            mu, sd = robust_stats(block, axis=1)
+    if np.all(np.isnan(mu)):
+        return np.zeros(m, np.float32), np.ones(m, np.float32)
+    g_mu, g_sd = robust_stats(block[~np.isnan(block)])
+    mu = np.where(np.isnan(mu), g_mu, mu)
+    sd = np.where(np.isnan(sd), g_sd, sd)
+    return mu.astype(np.float32), sd.astype(np.float32)
+
+
+def lag_background(sims: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray]:
+    """(mu, sd) of the similarities of nodes ``lag`` apart in time, for lag 0..max_lag.
+
+    Nodes a few steps apart on the same street look alike without being the same
+    place; their similarity is judged against other pairs at the same lag.
+    """
+    m = sims.shape[0]
+    mu = np.full(max_lag + 1, np.inf, np.float32)
+    sd = np.ones(max_lag + 1, np.float32)
+    for lag in range(1, min(max_lag, m - 1) + 1):
+        mu[lag], sd[lag] = robust_stats(np.diagonal(sims, lag).astype(np.float64))
+    return mu, sd
+
+
+def zscores(sims: np.ndarray, exclude: int, max_lag: int | None = None) -> np.ndarray:
+    """(m, m) float32 z-scores of a similarity matrix against each node's background.
+
+    For pairs at most ``max_lag`` (default 4 * exclude + 8) apart in time the z-score
+    against the pairs at the same lag is used too, and the smaller of the two kept.
+    """
+    mu, sd = background(sims, exclude)
+    centre = 0.5 * (mu[:, None] + mu[None, :])
+    spread = np.sqrt(0.5 * (sd[:, None] ** 2 + sd[None, :] ** 2))
+    z = ((sims - centre) / spread).astype(np.float32)
+    m = sims.shape[0]
+    max_lag = 4 * exclude + 8 if max_lag is None else int(max_lag)
+    if m > 1 and max_lag > 0:
+        lag_mu, lag_sd = lag_background(sims, max_lag)
+        idx = np.arange(m)
+        lag = np.abs(idx[:, None] - idx[None, :])
+        close = (lag >= 1) & (lag <= max_lag)
+        li = lag[close]
+        z[close] = np.minimum(z[close], (sims[close] - lag_mu[li]) / lag_sd[li])
+    return z
+
+
+def node_threshold(vectors: np.ndarray) -> float:
+    """Automatic node_sim_th: half-way from the median consecutive-sample similarity to 1."""
+    v = np.asarray(vectors, dtype=np.float32)
+    if v.shape[0] < 2:
+        return 0.9
+    step = np.einsum("ij,ij->i", v[:-1], v[1:])
+    return float(0.5 * (float(np.median(step)) + 1.0))

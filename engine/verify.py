@@ -1,0 +1,91 @@
+"""Yaw-aligned verification of loop candidates by circular alignment of column signatures.
+
+At describe time every (panorama-shifted) frame is reduced to a small per-column
+signature (``column_features``: colour and structure of a few horizontal bands per
+column, ``COLUMN_WIDTH`` columns). Two panoramas of the same place differ by a yaw
+rotation, i.e. a circular shift of columns, so for a candidate pair we search all
+circular shifts at once (FFT cross-correlation, as Scan Context does for lidar rings)
+and keep the best: its correlation is the verification score (1 = identical up to a
+roll, ~0 unrelated) and its shift is the relative heading.
+
+Yaw convention (same as ``engine.shift.relative_yaw``): the yaw of pair (a, b) is how
+far, in degrees, the content of frame a appears displaced in frame b (positive towards
+increasing column) in the ORIGINAL, unshifted frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import InputError
+from .shift import column_signature
+
+# Columns of a signature (2.8 degrees per column): enough for yaw, small enough to keep.
+COLUMN_WIDTH = 128
+# Bump when column_features changes, so cached descriptors are recomputed.
+COLUMNS_VERSION = 1
+# Pairs aligned per FFT batch (bounds memory to a few MB).
+_BATCH = 512
+
+
+def column_features(rgb: np.ndarray, width: int = COLUMN_WIDTH) -> np.ndarray:
+    """Per-column signature of one panorama: float16 (width', F), F signals per column.
+
+    Every signal is zero-mean and unit-norm over the columns (``shift.column_signature``),
+    so the dot product of two aligned signatures summed over signals is a correlation.
+    """
+    return column_signature(rgb, width=width).T.astype(np.float16)
+
+
+def _spectra(columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """rfft over columns of (k, W, F) signatures -> (k, F, W//2+1) and the active-signal mask."""
+    c = np.asarray(columns, dtype=np.float32).transpose(0, 2, 1)   # (k, F, W)
+    active = np.any(c != 0, axis=2)                                 # (k, F)
+    return np.fft.rfft(c, axis=2), active
+
+
+def align(columns_a: np.ndarray, columns_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Best circular alignment of K signature pairs (K, W, F) each.
+
+    Returns ``score`` (K,) mean correlation at the best shift, ``shift`` (K,) int columns
+    (content of a at column j appears at j + shift in b), and ``margin`` (K,): best score
+    minus the best score more than W/8 columns away (how unique the alignment is).
+    """
+    a = np.asarray(columns_a)
+    b = np.asarray(columns_b)
+    if a.shape != b.shape or a.ndim != 3:
+        raise InputError(f"column signatures must have equal (K, W, F) shapes, got {a.shape} and {b.shape}")
+    k, w, _ = a.shape
+    score = np.zeros(k, np.float32)
+    shift = np.zeros(k, np.int64)
+    margin = np.zeros(k, np.float32)
+    far = max(1, w // 8)
+    for s0 in range(0, k, _BATCH):
+        s1 = min(k, s0 + _BATCH)
+        fa, act_a = _spectra(a[s0:s1])
+        fb, act_b = _spectra(b[s0:s1])
+        n_active = np.maximum((act_a & act_b).sum(axis=1), 1)
+        corr = np.fft.irfft((np.conj(fa) * fb).sum(axis=1), n=w, axis=1) / n_active[:, None]
+        best = np.argmax(corr, axis=1)
+        top = corr[np.arange(s1 - s0), best]
+        dist = np.abs(np.arange(w)[None, :] - best[:, None])
+        dist = np.minimum(dist, w - dist)
+        second = np.where(dist > far, corr, -np.inf).max(axis=1)
+        score[s0:s1] = top
+        shift[s0:s1] = best
+        margin[s0:s1] = top - second
+    return score, shift, margin
+
+
+def pair_yaw(shift_cols: np.ndarray, column_width: int, frame_shift_a: np.ndarray,
+             frame_shift_b: np.ndarray, frame_width: int) -> np.ndarray:
+    """Relative yaw (degrees, (-180, 180]) of the original frames of each pair.
+
+    ``shift_cols`` is the alignment of the shifted frames at ``column_width`` columns;
+    the panorama shifts ``frame_shift_*`` (full-resolution columns) are added back.
+    """
+    deg = (np.asarray(shift_cols, np.float64) * 360.0 / column_width
+           + (np.asarray(frame_shift_b, np.float64) - np.asarray(frame_shift_a, np.float64))
+           * 360.0 / float(frame_width))
+    deg = (deg + 180.0) % 360.0 - 180.0
+    return np.where(deg == -180.0, 180.0, deg)
