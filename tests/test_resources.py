@@ -119,3 +119,16 @@ def test_wheel_ships_the_resources_and_the_installed_package_finds_them(tmp_path
     assert Path(found["dir"]) == site / "resources"
     assert found["missing"] == []
     assert found["map"] == resources.default_settings()["map"]
+
+
+def test_bundle_entry_script_runs_the_console_script() -> None:
+    # The PyInstaller entry must call the same function as the installed `panotopo` command.
+    import ast
+    import tomllib
+
+    script = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]["panotopo"]
+    module, func = script.split(":")
+    tree = ast.parse((ROOT / "packaging" / "panotopo_entry.py").read_text())
+    imported = {(node.module, alias.name) for node in ast.walk(tree) if isinstance(node, ast.ImportFrom)
+                for alias in node.names}
+    assert (module, func) in imported, f"packaging/panotopo_entry.py does not import {script}"
