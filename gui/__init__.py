@@ -1,0 +1,5 @@
+"""panotopo desktop app (PySide6 + pyqtgraph). Imports engine; engine never imports this."""
+
+from .qt_compat import protect_bools
+
+protect_bools()  # before any signal is emitted (see gui/qt_compat.py)

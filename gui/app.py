@@ -1,0 +1,81 @@
+"""Entry points of the desktop app: ``main(argv)`` and ``run(input_path, screenshot)``.
+
+``panotopo gui [INPUT] [--screenshot PNG]`` calls ``run``. With a screenshot path the
+app runs without dialogs: it opens INPUT, runs the engine, selects the first loop
+candidate so every view is filled, saves the window picture and exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import Optional
+
+
+def _ensure_platform(headless: bool) -> None:
+    # No display (CI, ssh): draw offscreen. Must happen before Qt is imported.
+    if headless and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+
+def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
+    """Open the window (and INPUT); with ``screenshot``, save a picture and return."""
+    _ensure_platform(screenshot is not None)
+    from PySide6.QtCore import QEventLoop, QTimer
+    from PySide6.QtWidgets import QApplication
+
+    from .main_window import MainWindow
+
+    app = QApplication.instance() or QApplication([sys.argv[0] if sys.argv else "panotopo"])
+    app.setApplicationName("panotopo")
+    app.setOrganizationName("panotopo")
+    window = MainWindow(interactive=screenshot is None)
+    if screenshot is not None:
+        window.resize(1600, 1000)
+    window.show()
+
+    if screenshot is None:
+        if input_path:
+            QTimer.singleShot(0, lambda: window.open_path(input_path))
+        return app.exec()
+
+    status = 0
+    try:
+        if input_path:
+            if not window.open_path(input_path):
+                print(f"panotopo: {window._last_error or 'cannot open ' + input_path}", file=sys.stderr)
+                return 2
+            if window.runner.running:
+                loop = QEventLoop()
+                outcome: dict = {}
+                window.mapReady.connect(lambda: (outcome.setdefault("ok", True), loop.quit()))
+                window.runFailed.connect(lambda m: (outcome.setdefault("error", m), loop.quit()))
+                window.runCancelled.connect(lambda: (outcome.setdefault("error", "run cancelled"), loop.quit()))
+                loop.exec()
+                if "error" in outcome:
+                    print(f"panotopo: {outcome['error']}", file=sys.stderr)
+                    return 2
+            window.select_first_loop()
+        for _ in range(5):  # let layouts and pyqtgraph settle before the picture
+            app.processEvents()
+        if not window.grab().save(screenshot):
+            print(f"panotopo: cannot write {screenshot}", file=sys.stderr)
+            status = 2
+    finally:
+        window.undo_stack.setClean()
+        window._extra_dirty = False
+        window.close()
+    return status
+
+
+def main(argv: Optional[list[str]] = None) -> int:
+    parser = argparse.ArgumentParser(prog="panotopo-gui", description="panotopo desktop app")
+    parser.add_argument("input", nargs="?", help="recording, bag, folder, session (.json) or descriptors (.npz)")
+    parser.add_argument("--screenshot", metavar="PNG", help="run, save a picture of the window and exit")
+    args = parser.parse_args(argv)
+    return run(args.input, args.screenshot)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

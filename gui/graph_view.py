@@ -1,0 +1,231 @@
+"""Graph view: nodes and arcs of the map, loops styled by status, with a legend.
+
+Nodes sit at ground-truth positions when poses are loaded, else on a force
+layout of the path (``gui.layout``). Click a node: jump to its frame. Click a loop
+arc: select it. Ctrl+click a second node: propose a manual loop between it and
+the current node.
+"""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+from .document import Document, LoopKey
+from .layout import path_layout
+from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
+                    STATUS_LABELS, status_pen)
+
+CLICK_RADIUS_PX = 9
+
+
+class GraphView(QWidget):
+    nodeClicked = Signal(int)           # node index
+    loopClicked = Signal(object)        # LoopKey
+    manualLoopRequested = Signal(int, int)  # node indices (current node, ctrl+clicked node)
+
+    def __init__(self, doc: Document, parent: Optional[QWidget] = None) -> None:
+        super().__init__(parent)
+        self.doc = doc
+        self.x = np.zeros(0)
+        self.y = np.zeros(0)
+        self.current_node: Optional[int] = None
+        self.selected_key: Optional[LoopKey] = None
+        self._loop_segments: list[tuple[LoopKey, int, int]] = []
+
+        self.plot = pg.PlotWidget(background="w")
+        self.plot.setAspectLocked(True)
+        self.plot.showGrid(x=True, y=True, alpha=0.15)
+        self.plot.setMenuEnabled(False)
+        self.plot.getPlotItem().hideButtons()
+        self.legend = self.plot.addLegend(offset=(8, 8), labelTextColor="#222", brush=pg.mkBrush(255, 255, 255, 220),
+                                          pen=pg.mkPen("#bbb"))
+        self.selected_item = pg.PlotDataItem(pen=pg.mkPen(pg.mkColor(SELECTED_COLOR), width=7))
+        self.selected_item.setOpacity(0.45)
+        self.plot.addItem(self.selected_item)
+        self.sequential_item = pg.PlotDataItem(pen=pg.mkPen(SEQUENTIAL_COLOR, width=1.5), name="path (sequential)")
+        self.plot.addItem(self.sequential_item)
+        self.loop_items: dict[str, pg.PlotDataItem] = {}
+        for status in ("rejected", "auto", "confirmed", "manual"):
+            item = pg.PlotDataItem(pen=status_pen(status, width=2), name=f"loop: {STATUS_LABELS[status]}")
+            self.loop_items[status] = item
+            self.plot.addItem(item)
+        self.nodes_item = pg.ScatterPlotItem(size=6, pen=pg.mkPen("w", width=0.5), brush=pg.mkBrush(NODE_COLOR),
+                                             name="node", hoverable=True, tip=self._node_tip)
+        self.plot.addItem(self.nodes_item)
+        self.ends_item = pg.ScatterPlotItem(size=11, symbol="s", pen=pg.mkPen("k"), brush=pg.mkBrush("#f1c40f"))
+        self.plot.addItem(self.ends_item)
+        self.current_item = pg.ScatterPlotItem(size=16, pen=pg.mkPen(CURRENT_COLOR, width=3), brush=None,
+                                               name="current frame")
+        self.plot.addItem(self.current_item)
+        self.label_items: list[pg.TextItem] = []
+        self.plot.scene().sigMouseClicked.connect(self._scene_clicked)
+        self.plot.setToolTip("Click a node to see its frame, click a loop to select it, "
+                             "Ctrl+click a node to add a manual loop to the current node")
+
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addWidget(self.plot)
+
+        doc.mapReplaced.connect(self.rebuild)
+        doc.posesChanged.connect(self.rebuild)
+        doc.loopsChanged.connect(self.redraw_loops)
+        doc.labelsChanged.connect(self.redraw_labels)
+
+    # -- drawing ---------------------------------------------------------------------
+    def rebuild(self) -> None:
+        """Place the nodes again (new map or new poses) and redraw everything."""
+        if not self.doc.has_map:
+            self.x = self.y = np.zeros(0)
+        else:
+            positions = self.doc.topomap.positions() if self.doc.poses is not None else None
+            self.x, self.y = positions if positions is not None else path_layout(self.doc.topomap)
+        with_gt = self.doc.poses is not None and self.doc.has_map
+        for axis in ("left", "bottom"):
+            self.plot.getPlotItem().showAxis(axis, with_gt)
+        self.plot.setLabel("bottom", "x (m)" if with_gt else "")
+        self.plot.setLabel("left", "y (m)" if with_gt else "")
+        self.plot.showGrid(x=with_gt, y=with_gt, alpha=0.15)
+        self.plot.setTitle("Ground-truth positions" if with_gt else
+                           ("Layout of the path (no ground truth loaded)" if self.doc.has_map else ""),
+                           color="#444", size="9pt")
+        n = self.x.size
+        if n > 1:
+            self.sequential_item.setData(_pairs(self.x, np.arange(n - 1), np.arange(1, n)),
+                                         _pairs(self.y, np.arange(n - 1), np.arange(1, n)), connect="pairs")
+        else:
+            self.sequential_item.setData([], [])
+        self.nodes_item.setData(x=self.x, y=self.y, data=np.arange(n))
+        self.ends_item.setData(x=self.x[[0, -1]] if n else [], y=self.y[[0, -1]] if n else [])
+        self.redraw_loops()
+        self.redraw_labels()
+        self.set_current_node(self.current_node)
+        if n:
+            self.plot.getPlotItem().enableAutoRange()
+            self.plot.autoRange(padding=0.06)
+
+    def redraw_loops(self) -> None:
+        self._loop_segments = []
+        by_status: dict[str, list[tuple[int, int]]] = {s: [] for s in self.loop_items}
+        if self.doc.has_map and self.x.size:
+            for row in self.doc.loop_rows():
+                by_status.setdefault(row.status, []).append((row.index_u, row.index_v))
+                self._loop_segments.append((row.key, row.index_u, row.index_v))
+        for status, item in self.loop_items.items():
+            pairs = np.array(by_status.get(status, []), dtype=np.int64).reshape(-1, 2)
+            if pairs.size:
+                item.setData(_pairs(self.x, pairs[:, 0], pairs[:, 1]), _pairs(self.y, pairs[:, 0], pairs[:, 1]),
+                             connect="pairs")
+            else:
+                item.setData([], [])
+        self.set_selected_loop(self.selected_key)
+
+    def redraw_labels(self) -> None:
+        for item in self.label_items:
+            self.plot.removeItem(item)
+        self.label_items = []
+        if not self.doc.has_map or self.x.size == 0:
+            return
+        for node, data in self.doc.topomap.graph.nodes(data=True):
+            if data.get("label"):
+                k = int(data["index"])
+                text = pg.TextItem(str(data["label"]), color="#111", anchor=(0.5, 1.3),
+                                   fill=pg.mkBrush(255, 255, 255, 200), border=pg.mkPen("#999"))
+                text.setPos(self.x[k], self.y[k])
+                self.plot.addItem(text)
+                self.label_items.append(text)
+
+    def set_current_node(self, k: Optional[int]) -> None:
+        self.current_node = k
+        if k is None or not (0 <= k < self.x.size):
+            self.current_item.setData([], [])
+            return
+        self.current_item.setData([self.x[k]], [self.y[k]])
+
+    def set_selected_loop(self, key: Optional[LoopKey]) -> None:
+        self.selected_key = key
+        match = [(a, b) for k, a, b in self._loop_segments if k == key] if key is not None else []
+        if not match and key is not None and self.doc.has_map and self.doc.nodes_of(key) is not None:
+            u, v = self.doc.nodes_of(key)  # a pair that is not a loop (from the matrix)
+            match = [(int(self.doc.node_data(u)["index"]), int(self.doc.node_data(v)["index"]))]
+        if match and self.x.size:
+            a, b = match[0]
+            self.selected_item.setData([self.x[a], self.x[b]], [self.y[a], self.y[b]])
+        else:
+            self.selected_item.setData([], [])
+
+    def _node_tip(self, x: float, y: float, data) -> str:
+        if not self.doc.has_map:
+            return ""
+        node = self.doc.node_id(int(data))
+        d = self.doc.node_data(node)
+        label = f" “{d['label']}”" if d.get("label") else ""
+        return f"{node}{label}\nframe {d['frame']}, t = {float(d['stamp']):.2f} s"
+
+    # -- clicks ----------------------------------------------------------------------
+    def _scene_clicked(self, event) -> None:
+        if event.button() != Qt.LeftButton or self.x.size == 0:
+            return
+        vb = self.plot.getPlotItem().getViewBox()
+        if not vb.sceneBoundingRect().contains(event.scenePos()):
+            return
+        p = vb.mapSceneToView(event.scenePos())
+        k, dist = self.nearest_node(p.x(), p.y())
+        ctrl = bool(event.modifiers() & Qt.ControlModifier)
+        if k is not None and dist <= CLICK_RADIUS_PX:
+            if ctrl and self.current_node is not None and k != self.current_node:
+                self.manualLoopRequested.emit(self.current_node, k)
+            else:
+                self.nodeClicked.emit(k)
+            event.accept()
+            return
+        key, ldist = self.nearest_loop(p.x(), p.y())
+        if key is not None and ldist <= CLICK_RADIUS_PX:
+            self.loopClicked.emit(key)
+            event.accept()
+
+    def _pixel_scale(self) -> tuple[float, float]:
+        px, py = self.plot.getPlotItem().getViewBox().viewPixelSize()
+        return max(px, 1e-12), max(py, 1e-12)
+
+    def nearest_node(self, x: float, y: float) -> tuple[Optional[int], float]:
+        """Nearest node and its distance in screen pixels."""
+        if self.x.size == 0:
+            return None, np.inf
+        px, py = self._pixel_scale()
+        d = np.hypot((self.x - x) / px, (self.y - y) / py)
+        k = int(np.argmin(d))
+        return k, float(d[k])
+
+    def nearest_loop(self, x: float, y: float) -> tuple[Optional[LoopKey], float]:
+        if not self._loop_segments:
+            return None, np.inf
+        px, py = self._pixel_scale()
+        ia = np.array([a for _, a, _ in self._loop_segments])
+        ib = np.array([b for _, _, b in self._loop_segments])
+        ax, ay = self.x[ia] / px, self.y[ia] / py
+        bx, by = self.x[ib] / px, self.y[ib] / py
+        qx, qy = x / px, y / py
+        dx, dy = bx - ax, by - ay
+        t = np.clip(((qx - ax) * dx + (qy - ay) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0, 1)
+        d = np.hypot(ax + t * dx - qx, ay + t * dy - qy)
+        i = int(np.argmin(d))
+        return self._loop_segments[i][0], float(d[i])
+
+    def node_screen_pos(self, k: int):
+        """Widget coordinates of node ``k`` (for tests and tooltips)."""
+        vb = self.plot.getPlotItem().getViewBox()
+        scene = vb.mapViewToScene(pg.Point(float(self.x[k]), float(self.y[k])))
+        return self.plot.mapFromScene(scene)
+
+
+def _pairs(values: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Interleave values[a], values[b] for a 'pairs' line item."""
+    out = np.empty(2 * len(a), dtype=np.float64)
+    out[0::2] = values[a]
+    out[1::2] = values[b]
+    return out

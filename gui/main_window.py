@@ -1,0 +1,998 @@
+"""The main window: menus, docks, the run, curation, sessions and export.
+
+Layout: left the frame viewer; right top the graph view and the similarity
+matrix in tabs; right bottom the loop table beside the pair view; docks for the
+parameters and the evaluation.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+from PySide6.QtCore import QSettings, Qt, QTimer, Signal
+from PySide6.QtGui import QAction, QCloseEvent, QDragEnterEvent, QDropEvent, QIcon, QKeySequence, QUndoStack
+from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDialog, QLabel, QMainWindow,
+                               QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget, QWidget)
+
+from engine.errors import InputError
+from engine.params import MapParams
+from engine.session import Session, autosave_path_for, is_session_file, session_path_for
+
+from . import commands
+from .document import Document, LoopKey
+from .eval_panel import EvalPanel
+from .frame_cache import FrameCache
+from .frame_viewer import FrameViewer
+from .graph_view import GraphView
+from .loop_table import LoopTable
+from .manual_loop_dialog import ManualLoopDialog
+from .pair_view import PairView
+from .params_panel import ParamsPanel
+from .similarity_view import SimilarityView
+from .worker import RunController, RunJob, RunResult
+
+APP_NAME = "panotopo"
+AUTOSAVE_MS = 30_000
+MAX_RECENT = 10
+RESOURCES = Path(__file__).resolve().parent.parent / "resources"
+OPEN_FILTER = ("Recordings and sessions (*.mp4 *.avi *.mkv *.mov *.webm *.m4v *.bag *.db3 *.mcap "
+               "*.panotopo.json *.json *.npz);;Videos (*.mp4 *.avi *.mkv *.mov *.webm *.m4v);;"
+               "ROS bags (*.bag *.db3 *.mcap);;Sessions (*.json);;Descriptors (*.npz);;All files (*)")
+
+
+class MainWindow(QMainWindow):
+    mapReady = Signal()          # a run (or a parameter change) produced the map now shown
+    runFailed = Signal(str)
+    runCancelled = Signal()
+
+    def __init__(self, settings: Optional[QSettings] = None, cache_root: Optional[str] = None,
+                 describe_options: Optional[dict] = None, interactive: bool = True) -> None:
+        super().__init__()
+        self.settings = settings if settings is not None else QSettings(APP_NAME, APP_NAME)
+        self.cache_root = cache_root
+        self.describe_options = dict(describe_options or {})
+        self.interactive = interactive
+        self.doc = Document(self)
+        self.frames = FrameCache()
+        self.undo_stack = QUndoStack(self)
+        self.runner = RunController(self)
+        self.advance_after_decision = True
+        self._pending_decisions: Optional[dict] = None
+        self._pending_view: dict = {}
+        self._extra_dirty = False     # changes outside the undo stack (poses loaded)
+        self._defaults: dict = {}
+        self._last_error = ""
+
+        self._build_views()
+        self._build_actions()
+        self._build_menus()
+        self._build_status_bar()
+        self._connect()
+        self._update_title()
+        self._update_actions()
+
+        self.autosave_timer = QTimer(self)
+        self.autosave_timer.setInterval(AUTOSAVE_MS)
+        self.autosave_timer.timeout.connect(self.autosave)
+        self.autosave_timer.start()
+        self.setAcceptDrops(True)
+        for name in ("icon.png", "panotopo.png", "icon.svg", "panotopo.svg"):
+            if (RESOURCES / name).is_file():
+                self.setWindowIcon(QIcon(str(RESOURCES / name)))
+                break
+        self.resize(1500, 950)
+        geometry = self.settings.value("window/geometry")
+        if geometry is not None and interactive:
+            self.restoreGeometry(geometry)
+
+    # ==== construction ==============================================================
+    def _build_views(self) -> None:
+        self.frame_viewer = FrameViewer(self.doc, self.frames)
+        self.graph_view = GraphView(self.doc)
+        self.similarity_view = SimilarityView(self.doc)
+        self.loop_table = LoopTable(self.doc)
+        self.pair_view = PairView(self.doc, self.frames)
+        self.params_panel = ParamsPanel()
+        self.eval_panel = EvalPanel(self.doc)
+
+        self.tabs = QTabWidget()
+        self.tabs.addTab(self.graph_view, "Graph")
+        self.tabs.addTab(self.similarity_view, "Similarity matrix")
+        bottom = QSplitter(Qt.Horizontal)
+        bottom.addWidget(self.loop_table)
+        bottom.addWidget(self.pair_view)
+        bottom.setSizes([480, 520])
+        right = QSplitter(Qt.Vertical)
+        right.addWidget(self.tabs)
+        right.addWidget(bottom)
+        right.setSizes([520, 430])
+        self.main_splitter = QSplitter(Qt.Horizontal)
+        self.main_splitter.addWidget(self.frame_viewer)
+        self.main_splitter.addWidget(right)
+        self.main_splitter.setSizes([560, 940])
+        self.main_splitter.setChildrenCollapsible(False)
+        self.main_splitter.setStretchFactor(0, 2)
+        self.main_splitter.setStretchFactor(1, 3)
+        self.setCentralWidget(self.main_splitter)
+
+        self.params_dock = QDockWidget("Parameters", self)
+        self.params_dock.setObjectName("params_dock")
+        self.params_dock.setWidget(self.params_panel)
+        self.addDockWidget(Qt.LeftDockWidgetArea, self.params_dock)
+        self.eval_dock = QDockWidget("Evaluation", self)
+        self.eval_dock.setObjectName("eval_dock")
+        self.eval_dock.setWidget(self.eval_panel)
+        self.addDockWidget(Qt.LeftDockWidgetArea, self.eval_dock)
+        self.splitDockWidget(self.params_dock, self.eval_dock, Qt.Vertical)
+        self.resizeDocks([self.params_dock], [250], Qt.Horizontal)
+
+    def _action(self, text: str, slot, shortcut=None, tip: str = "") -> QAction:
+        action = QAction(text, self)
+        if shortcut is not None:
+            keys = shortcut if isinstance(shortcut, (list, tuple)) else [shortcut]
+            action.setShortcuts([QKeySequence(k) for k in keys])
+        if tip:
+            action.setStatusTip(tip)
+            action.setToolTip(tip)
+        action.triggered.connect(lambda checked=False: slot())
+        self.addAction(action)  # shortcuts work even with the menu bar hidden
+        return action
+
+    def _build_actions(self) -> None:
+        A = self._action
+        self.open_action = A("&Open…", self.open_dialog, QKeySequence.Open,
+                             "Open a video, a ROS bag, a folder of images, a session or a descriptors .npz")
+        self.open_folder_action = A("Open &folder or ROS2 bag…", self.open_folder_dialog, None,
+                                    "Open a folder of panoramas or a ROS2 bag directory")
+        self.poses_action = A("Load &poses…", self.load_poses_dialog, None,
+                              "Load ground-truth poses (CSV t,x,y[,yaw] or a bag topic) for evaluation")
+        self.save_action = A("&Save session", self.save_session, QKeySequence.Save,
+                             "Save decisions and parameters next to the recording")
+        self.save_as_action = A("Save session &as…", self.save_session_as, QKeySequence.SaveAs)
+        self.export_action = A("&Export corrected graph (GraphML)…", self.export_graphml_dialog, "Ctrl+E",
+                               "Write the corrected map: rejected loops left out, confirmed and manual kept")
+        self.export_png_action = A("Export graph &picture (PNG)…", self.export_png_dialog, None,
+                                   "Save a picture of the graph view")
+        self.export_plot_action = A("Export evaluation &plot (PNG)…", self.export_plot_dialog, None,
+                                    "Map and similarity matrix with ground-truth colours")
+        self.quit_action = A("&Quit", self.close, QKeySequence.Quit)
+
+        self.undo_action = self.undo_stack.createUndoAction(self, "&Undo")
+        self.undo_action.setShortcuts([QKeySequence.Undo])
+        self.redo_action = self.undo_stack.createRedoAction(self, "&Redo")
+        self.redo_action.setShortcuts([QKeySequence("Ctrl+Shift+Z"), QKeySequence("Ctrl+Y")])
+        self.addAction(self.undo_action)
+        self.addAction(self.redo_action)
+        self.label_action = A("Name this &place…", self.name_place_dialog, "L",
+                              "Give the current node a place name")
+
+        self.confirm_action = A("&Confirm loop", lambda: self.decide("confirmed"), ["C", "Y"],
+                                "Same place: keep the selected loop")
+        self.reject_action = A("&Reject loop", lambda: self.decide("rejected"), ["R", "N"],
+                               "Different places: drop the selected loop")
+        self.reset_action = A("Rese&t loop", lambda: self.decide("auto"), ["Backspace", "U"],
+                              "Back to undecided")
+        self.next_action = A("&Next loop", lambda: self.loop_table.step(1), ["J", "PgDown"])
+        self.prev_action = A("&Previous loop", lambda: self.loop_table.step(-1), ["K", "PgUp"])
+        self.manual_action = A("&Add manual loop…", self.manual_loop_dialog, "M",
+                               "Join two nodes that are the same place")
+        self.remove_action = A("Re&move manual loop", self.remove_selected_manual, "Delete")
+        self.advance_action = QAction("Advance after a decision", self, checkable=True, checked=True)
+        self.advance_action.toggled.connect(lambda on: setattr(self, "advance_after_decision", on))
+
+        self.run_action = A("&Run", self.start_run, "F5", "Describe the recording and build the map")
+        self.cancel_action = A("&Cancel run", self.cancel_run, "Esc", "Stop the run; the current map is kept")
+        self.shortcuts_action = A("&Keyboard shortcuts", self.show_shortcuts, "F1")
+        self.about_action = A("&About panotopo", self.show_about)
+
+    def _build_menus(self) -> None:
+        bar = self.menuBar()
+        m = bar.addMenu("&File")
+        for a in (self.open_action, self.open_folder_action):
+            m.addAction(a)
+        self.recent_menu = m.addMenu("Open &recent")
+        m.addSeparator()
+        m.addAction(self.poses_action)
+        m.addSeparator()
+        for a in (self.save_action, self.save_as_action):
+            m.addAction(a)
+        m.addSeparator()
+        for a in (self.export_action, self.export_png_action, self.export_plot_action):
+            m.addAction(a)
+        m.addSeparator()
+        m.addAction(self.quit_action)
+        m = bar.addMenu("&Edit")
+        for a in (self.undo_action, self.redo_action):
+            m.addAction(a)
+        m.addSeparator()
+        m.addAction(self.label_action)
+        m = bar.addMenu("&Loops")
+        for a in (self.confirm_action, self.reject_action, self.reset_action):
+            m.addAction(a)
+        m.addSeparator()
+        for a in (self.next_action, self.prev_action):
+            m.addAction(a)
+        m.addSeparator()
+        for a in (self.manual_action, self.remove_action):
+            m.addAction(a)
+        m.addSeparator()
+        m.addAction(self.advance_action)
+        m = bar.addMenu("&Run")
+        m.addAction(self.run_action)
+        m.addAction(self.cancel_action)
+        m = bar.addMenu("&View")
+        m.addAction(self.params_dock.toggleViewAction())
+        m.addAction(self.eval_dock.toggleViewAction())
+        m = bar.addMenu("&Help")
+        m.addAction(self.shortcuts_action)
+        m.addAction(self.about_action)
+        self._rebuild_recent_menu()
+
+    def _build_status_bar(self) -> None:
+        status = self.statusBar()
+        self.summary_label = QLabel()
+        self.summary_label.setToolTip("Nodes and loops of the current map")
+        self.progress_bar = QProgressBar()
+        self.progress_bar.setMaximumWidth(260)
+        self.progress_bar.setTextVisible(True)
+        self.eta_label = QLabel()
+        self.cancel_button = QPushButton("Cancel")
+        self.cancel_button.setToolTip("Stop the run (Esc); the current map and decisions are kept")
+        self.cancel_button.clicked.connect(self.cancel_run)
+        status.addPermanentWidget(self.summary_label)
+        status.addPermanentWidget(self.progress_bar)
+        status.addPermanentWidget(self.eta_label)
+        status.addPermanentWidget(self.cancel_button)
+        self._show_progress(False)
+        status.showMessage("Open a recording to start (File ▸ Open, or drop a file here)")
+
+    def _connect(self) -> None:
+        # Bound methods, not lambdas: Qt drops these connections when the window dies.
+        self.undo_stack.cleanChanged.connect(self._update_title)
+        self.undo_stack.indexChanged.connect(self._update_actions)
+        self.runner.progress.connect(self._on_progress)
+        self.runner.finished.connect(self._on_run_finished)
+        self.runner.failed.connect(self._on_run_failed)
+        self.runner.cancelled.connect(self._on_run_cancelled)
+
+        self.frame_viewer.frameChanged.connect(self._frame_changed)
+        self.graph_view.nodeClicked.connect(self.show_node)
+        self.graph_view.loopClicked.connect(self.select_loop)
+        self.graph_view.manualLoopRequested.connect(lambda a, b: self.manual_loop_dialog(a, b))
+        self.similarity_view.pairClicked.connect(self.select_pair)
+        self.loop_table.loopSelected.connect(self._loop_selected)
+        self.loop_table.view.decide.connect(self.decide)
+        self.pair_view.decide.connect(self.decide)
+        self.pair_view.addManual.connect(self.add_manual_loop)
+        self.pair_view.removeManual.connect(self.remove_manual_loop)
+        self.params_panel.paramsEdited.connect(self._params_edited)
+        self.params_panel.runRequested.connect(self.start_run)
+        self.params_panel.describeEdited.connect(
+            lambda: self.statusBar().showMessage("Descriptor settings changed: press Run (F5) to describe again", 8000))
+        self.doc.mapReplaced.connect(self._update_summary)
+        self.doc.loopsChanged.connect(self._update_summary)
+        self.doc.mapReplaced.connect(self._update_actions)
+        self.doc.loopsChanged.connect(self._update_actions)
+
+    # ==== opening =====================================================================
+    def open_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open", self._last_dir(), OPEN_FILTER)
+        if path:
+            self.open_path(path)
+
+    def open_folder_dialog(self) -> None:
+        path = QFileDialog.getExistingDirectory(self, "Open folder or ROS2 bag", self._last_dir())
+        if path:
+            self.open_path(path)
+
+    def open_path(self, path: str, topic: Optional[str] = None, pose_topic: Optional[str] = None,
+                  run: bool = True) -> bool:
+        """Open a recording, a bag, a folder, a session or a descriptors .npz (and run)."""
+        if not self.maybe_save():
+            return False
+        p = Path(path).expanduser()
+        try:
+            if p.is_file() and is_session_file(p):
+                ok = self._open_session(p, run=run)
+            else:
+                ok = self._open_input(p, topic, pose_topic, run=run)
+        except InputError as exc:
+            self.error(str(exc))
+            return False
+        if ok:
+            self._add_recent(str(p))
+        return ok
+
+    def _open_input(self, p: Path, topic: Optional[str], pose_topic: Optional[str], run: bool,
+                    session: Optional[Session] = None) -> bool:
+        from engine.pipeline import DescribeSettings, is_descriptor_file
+
+        if not p.exists():
+            raise InputError(f"{p}: no such file or directory")
+        source, descriptors_file = None, is_descriptor_file(p)
+        if descriptors_file:
+            from engine.descriptors.base import Descriptors
+
+            descs = Descriptors.load(p)  # validate now: a bad file fails here, not in the worker
+            source = self._source_for_descriptors(descs)
+            settings = DescribeSettings(descriptor=descs.meta.get("descriptor", self.params_panel.descriptor_name()),
+                                        interval=float(descs.meta.get("interval", 1.0) or 1.0),
+                                        shift=bool(descs.meta.get("shift", True)))
+        else:
+            if session is None and self._is_bag(p) and topic is None:
+                chosen = self._choose_bag_topics(p)
+                if chosen is None:
+                    return False
+                topic, pose_topic = chosen
+            from engine.sources import open_recording
+
+            source = open_recording(p, topic=topic)
+            if session is not None and session.describe:
+                settings = _describe_settings(session.describe, self.describe_options)
+            else:
+                params = session.map_params() if session else self.params_panel.params()
+                settings = DescribeSettings(descriptor=self.params_panel.descriptor_name(),
+                                            interval=self.params_panel.interval_value(), topic=topic,
+                                            shift=params.uses_shift, options=dict(self.describe_options))
+
+        # A new document: nothing of the previous one survives.
+        self.runner.stop()
+        self.undo_stack.clear()
+        self._extra_dirty = False
+        self.doc.topomap = None
+        self.doc.descs = None
+        self.doc.evaluation = None
+        self.doc.set_poses(None, None)
+        self.doc.session_path = None
+        self.doc.describe_settings = settings
+        self.doc.params = session.map_params() if session else MapParams(method=self.params_panel.params().method)
+        self._pending_decisions = dict(session.decisions) if session else None
+        self._pending_view = dict(session.view) if session else {}
+        self.doc.set_source(p, source)
+        self.doc.mapReplaced.emit()  # views clear
+        self.params_panel.set_describe(settings.descriptor, settings.interval)
+        self.params_panel.set_params(self.doc.params, self._defaults)
+
+        self._load_initial_poses(p, session, pose_topic)
+        if session is None and not descriptors_file:
+            self._offer_saved_work(p)
+        self._update_title()
+        self.statusBar().showMessage(f"Opened {p.name}", 5000)
+        if run:
+            self.start_run()
+        return True
+
+    def _open_session(self, path: Path, run: bool = True) -> bool:
+        session = Session.load(path)
+        ok = self._open_input(Path(session.input_path), session.describe.get("topic"), None, run=run,
+                              session=session)
+        if ok:
+            self.doc.session_path = path
+            self._update_title()
+        return ok
+
+    def _source_for_descriptors(self, descs):
+        """The recording a descriptors file was made from, if it is still there (for the viewer)."""
+        src = descs.meta.get("source")
+        if not src or not Path(src).exists():
+            return None
+        try:
+            from engine.sources import open_recording
+
+            return open_recording(Path(src), topic=descs.meta.get("topic"))
+        except InputError:
+            return None
+
+    @staticmethod
+    def _is_bag(p: Path) -> bool:
+        if p.is_file():
+            return p.suffix.lower() in (".bag", ".db3", ".mcap")
+        from engine.sources.rosbag import is_ros2_bag_dir
+
+        return p.is_dir() and is_ros2_bag_dir(p)
+
+    def _choose_bag_topics(self, p: Path) -> Optional[tuple[Optional[str], Optional[str]]]:
+        from engine.sources import list_image_topics, list_pose_topics
+
+        from .open_dialog import BagTopicDialog, default_topics
+
+        images = list_image_topics(p)
+        if not images:
+            raise InputError(f"{p}: the bag has no image topics")
+        poses = list_pose_topics(p)
+        if not self.interactive or (len(images) == 1 and not poses):
+            return default_topics(images, poses)
+        dialog = BagTopicDialog(str(p), images, poses, self)
+        if dialog.exec() != BagTopicDialog.Accepted:
+            return None
+        return dialog.chosen()
+
+    def _load_initial_poses(self, p: Path, session: Optional[Session], pose_topic: Optional[str]) -> None:
+        from engine.sources import read_poses
+
+        try:
+            if session is not None and session.poses_path:
+                self.doc.set_poses(read_poses(session.poses_path, session.poses_topic),
+                                   session.poses_path, session.poses_topic)
+            elif pose_topic:
+                self.doc.set_poses(read_poses(p, pose_topic), str(p), pose_topic)
+            else:
+                base = p if p.is_dir() else p.parent
+                for candidate in (p.with_name(p.stem + ".poses.csv"), p.parent / "poses.csv", base / "poses.csv"):
+                    if candidate.is_file():
+                        self.doc.set_poses(read_poses(candidate), str(candidate))
+                        self.statusBar().showMessage(f"Loaded ground truth from {candidate.name}", 5000)
+                        break
+        except InputError as exc:
+            self.warn(f"Ground-truth poses not loaded: {exc}")
+
+    def _offer_saved_work(self, p: Path) -> None:
+        """Reopen the saved session of this recording, or an autosave newer than it."""
+        saved, auto = session_path_for(p), autosave_path_for(p)
+        chosen: Optional[Path] = None
+        if auto.is_file() and (not saved.is_file() or auto.stat().st_mtime > saved.stat().st_mtime):
+            if self._ask_yes_no("Restore unsaved work",
+                                f"An autosave of unsaved decisions on {p.name} was found. Restore it?"):
+                chosen = auto
+        if chosen is None and saved.is_file():
+            chosen = saved
+        if chosen is None:
+            return
+        try:
+            session = Session.load(chosen)
+        except InputError as exc:
+            self.warn(str(exc))
+            return
+        self.doc.params = session.map_params()
+        self._pending_decisions = dict(session.decisions)
+        self._pending_view = dict(session.view)
+        self.params_panel.set_params(self.doc.params, self._defaults)
+        if chosen == saved:
+            self.doc.session_path = saved
+        else:
+            self._extra_dirty = True
+        self.statusBar().showMessage(f"Decisions restored from {chosen.name}", 8000)
+
+    # ==== poses ==========================================================================
+    def load_poses_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Load ground-truth poses", self._last_dir(),
+                                              "Poses (*.csv *.bag *.db3 *.mcap);;All files (*)")
+        if path:
+            self.load_poses(path)
+
+    def load_poses(self, path: str, topic: Optional[str] = None) -> bool:
+        from engine.sources import list_pose_topics, read_poses
+
+        p = Path(path)
+        try:
+            if topic is None and (self._is_bag(p)):
+                topics = [t for t, _m, _c in list_pose_topics(p)]
+                if not topics:
+                    raise InputError(f"{p}: the bag has no pose topics")
+                if len(topics) > 1 and self.interactive:
+                    topic, ok = QInputDialog.getItem(self, "Pose topic", "Ground-truth pose topic:", topics, 0, False)
+                    if not ok:
+                        return False
+                else:
+                    topic = topics[0]
+            poses = read_poses(p, topic)
+        except InputError as exc:
+            self.error(str(exc))
+            return False
+        self.doc.set_poses(poses, str(p), topic)
+        self._extra_dirty = True
+        self._update_title()
+        self.statusBar().showMessage(f"Ground truth loaded: {len(poses)} poses from {p.name}", 5000)
+        return True
+
+    # ==== running =========================================================================
+    def start_run(self) -> None:
+        from engine.pipeline import DescribeSettings
+
+        if self.doc.input_path is None:
+            self.statusBar().showMessage("Open a recording first", 5000)
+            return
+        old = self.doc.describe_settings or DescribeSettings()
+        descriptor = self.params_panel.descriptor_name()
+        interval = self.params_panel.interval_value()
+        if self.doc.descs is not None and str(self.doc.input_path).endswith(".npz"):
+            descriptor, interval = old.descriptor, old.interval  # a descriptors file is what it is
+        options = dict(old.options) if descriptor == old.descriptor else dict(self.describe_options)
+        settings = DescribeSettings(descriptor=descriptor, interval=interval, topic=old.topic,
+                                    shift=self.doc.params.uses_shift, options=options)
+        self._start(settings)
+
+    def _start(self, settings) -> None:
+        from engine.descriptors.cache import DescriptorCache
+
+        if self.runner.running:
+            self.runner.stop()
+        self._show_progress(True)
+        self._progress_stage = ""
+        self._stage_started = time.monotonic()
+        self.progress_bar.setRange(0, 0)
+        self.progress_bar.setFormat("starting…")
+        self.eta_label.setText("")
+        job = RunJob(Path(self.doc.input_path), settings, self.doc.params, DescriptorCache(self.cache_root))
+        self.statusBar().showMessage("Running the engine…")
+        self.runner.start(job)
+        self._update_actions()
+
+    def cancel_run(self) -> None:
+        if self.runner.running:
+            self.runner.cancel()
+            self.cancel_button.setEnabled(False)
+            self.statusBar().showMessage("Cancelling…")
+
+    def _on_progress(self, done: int, total: int, stage: str) -> None:
+        now = time.monotonic()
+        if stage != self._progress_stage:
+            self._progress_stage, self._stage_started = stage, now
+        if total > 0:
+            self.progress_bar.setRange(0, total)
+            self.progress_bar.setValue(min(done, total))
+            self.progress_bar.setFormat(f"{stage}: {done}/{total}")
+            elapsed = now - self._stage_started
+            if done > 0 and elapsed > 0.5:
+                self.eta_label.setText(f"ETA {_duration(elapsed * (total - done) / done)}")
+        else:
+            self.progress_bar.setRange(0, 0)
+            self.progress_bar.setFormat(stage)
+
+    def _on_run_finished(self, result: RunResult) -> None:
+        from engine.pipeline import descriptor_defaults
+
+        self._show_progress(False)
+        # Decisions survive a re-run: the current ones, or those of the session just opened.
+        decisions = self._pending_decisions if self._pending_decisions is not None else self.doc.decisions()
+        self._pending_decisions = None
+        self.doc.describe_settings = result.job.settings
+        self._defaults = descriptor_defaults(result.descs)
+        if self.doc.descs is not None and self.doc.descs is not result.descs:
+            pass  # descriptors replaced below
+        self._set_known_shifts(result.descs)
+        self.doc.replace_map(result.topomap, result.descs, decisions)
+        self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
+        self.params_panel.set_params(self.doc.params, self._defaults)
+        self._restore_view()
+        self.statusBar().showMessage(
+            f"Map built in {result.seconds:.1f} s: {self.doc.node_count()} nodes, "
+            f"{len(self.doc.topomap.loops())} loop candidates", 10000)
+        self._update_actions()
+        if self.is_modified():
+            self.autosave()
+        self.mapReady.emit()
+
+    def _on_run_failed(self, message: str) -> None:
+        self._show_progress(False)
+        self._update_actions()
+        self.error(message)
+        self.runFailed.emit(message)
+
+    def _on_run_cancelled(self) -> None:
+        self._show_progress(False)
+        self._update_actions()
+        self.statusBar().showMessage("Run cancelled; the current map and decisions are unchanged", 8000)
+        self.runCancelled.emit()
+
+    def _show_progress(self, on: bool) -> None:
+        for w in (self.progress_bar, self.eta_label, self.cancel_button):
+            w.setVisible(on)
+        self.cancel_button.setEnabled(on)
+
+    def _set_known_shifts(self, descs) -> None:
+        self.frames.known_shifts = ({int(f): int(s) for f, s in zip(descs.frames, descs.shifts)}
+                                    if descs.meta.get("shift", True) else {})
+
+    # ==== parameters ======================================================================
+    def _params_edited(self, field: str, new: MapParams) -> None:
+        old = self.doc.params
+        if new == old:
+            return
+        self.undo_stack.push(commands.ChangeParams(self._apply_params, old, new, field))
+
+    def _apply_params(self, _old: MapParams, new: MapParams) -> None:
+        """Rebuild the map with ``new`` (undo/redo and the panel both land here)."""
+        from engine.pipeline import build_map
+
+        self.doc.params = new
+        self.params_panel.set_params(new, self._defaults)
+        descs = self.doc.descs
+        if descs is None:
+            return
+        if new.uses_shift != bool(descs.meta.get("shift", True)):
+            if str(self.doc.input_path).endswith(".npz"):
+                self.warn(f"Method '{new.method}' needs {'shifted' if new.uses_shift else 'unshifted'} "
+                          "descriptors, which this descriptors file does not have")
+                return
+            self.start_run()  # describe again (cached when done before)
+            return
+        decisions = self.doc.decisions()
+        try:
+            topomap = build_map(descs, new, source=str(self.doc.input_path))
+        except InputError as exc:
+            self.warn(str(exc))
+            return
+        self.doc.replace_map(topomap, decisions=decisions)
+        self.statusBar().showMessage(
+            f"{self.doc.node_count()} nodes, {len(self.doc.topomap.loops())} loops with the new parameters", 5000)
+        self.mapReady.emit()
+
+    # ==== curation =========================================================================
+    def selected_key(self) -> Optional[LoopKey]:
+        return self.loop_table.selected_key() or self.pair_view.key
+
+    def decide(self, status: str) -> None:
+        key = self.selected_key()
+        attrs = self.doc.loop_attrs(key) if key is not None else None
+        if attrs is None:
+            self.statusBar().showMessage("Select a loop candidate first", 4000)
+            return
+        if attrs.get("status") == "manual":
+            self.statusBar().showMessage("A manual loop has no decision to change: remove it instead (Delete)", 5000)
+            return
+        following = self.loop_table.key_after(key) if self.advance_after_decision and status != "auto" else None
+        if attrs.get("status") != status:
+            self.undo_stack.push(commands.SetLoopStatus(self.doc, key, attrs.get("status", "auto"), status))
+        if following is not None:
+            self.loop_table.select_key(following)
+        else:
+            self.loop_table.select_key(key)
+
+    def add_manual_loop(self, key: LoopKey) -> bool:
+        try:
+            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key)))
+        except InputError as exc:
+            self.warn(str(exc))
+            return False
+        self.loop_table.select_key(tuple(key))
+        return True
+
+    def remove_manual_loop(self, key: LoopKey) -> None:
+        attrs = self.doc.loop_attrs(key)
+        if attrs is None or attrs.get("status") != "manual":
+            self.statusBar().showMessage("Only manual loops can be removed; reject a detected loop instead", 5000)
+            return
+        self.undo_stack.push(commands.RemoveLoop(self.doc, key))
+
+    def remove_selected_manual(self) -> None:
+        key = self.selected_key()
+        if key is not None:
+            self.remove_manual_loop(key)
+
+    def manual_loop_dialog(self, first: Optional[int] = None, second: Optional[int] = None) -> None:
+        if not self.doc.has_map:
+            return
+        if first is None:
+            first = self.doc.node_at_or_before(max(self.frame_viewer.current_frame, 0)) or 0
+        dialog = ManualLoopDialog(self.doc, first, second, self)
+        if dialog.exec() == ManualLoopDialog.Accepted:
+            a, b = dialog.nodes()
+            self.add_manual_loop(self._key_of_nodes(a, b))
+
+    def name_place_dialog(self) -> None:
+        if not self.doc.has_map:
+            return
+        k = self.doc.node_at_or_before(max(self.frame_viewer.current_frame, 0))
+        frame = int(self.doc.node_data(self.doc.node_id(k))["frame"])
+        old = self.doc.label_of_frame(frame)
+        text, ok = QInputDialog.getText(self, "Name this place", f"Place name of node n{k} (frame {frame}):", text=old)
+        if ok:
+            self.set_label(frame, text.strip())
+
+    def set_label(self, frame: int, label: str) -> None:
+        old = self.doc.label_of_frame(frame)
+        if label != old:
+            self.undo_stack.push(commands.SetLabel(self.doc, frame, old, label))
+
+    def _key_of_nodes(self, a: int, b: int) -> LoopKey:
+        fa = int(self.doc.node_data(self.doc.node_id(a))["frame"])
+        fb = int(self.doc.node_data(self.doc.node_id(b))["frame"])
+        return (min(fa, fb), max(fa, fb))
+
+    # ==== selection sync ===================================================================
+    def select_loop(self, key: LoopKey) -> None:
+        if not self.loop_table.select_key(key):
+            self.select_pair_key(key)
+
+    def select_pair(self, a: int, b: int) -> None:
+        """A pair of nodes clicked in the matrix: its loop, or the pair itself."""
+        key = self._key_of_nodes(a, b)
+        if self.doc.loop_attrs(key) is not None:
+            self.loop_table.select_key(key)
+        else:
+            self.select_pair_key(key)
+            self.statusBar().showMessage(
+                f"n{a} ↔ n{b} is not a loop: “Add as manual loop” in the pair view joins them", 6000)
+
+    def select_pair_key(self, key: LoopKey) -> None:
+        self.loop_table.select_key(None)
+        self.pair_view.show_pair(key)
+        self.graph_view.set_selected_loop(key)
+        self.similarity_view.set_selected_pair(key)
+
+    def _loop_selected(self, key: Optional[LoopKey]) -> None:
+        if key is None:
+            return
+        self.pair_view.show_pair(key)
+        self.graph_view.set_selected_loop(key)
+        self.similarity_view.set_selected_pair(key)
+        self.frame_viewer.show_frame(key[0])
+
+    def show_node(self, k: int) -> None:
+        self.frame_viewer.show_frame(int(self.doc.node_data(self.doc.node_id(k))["frame"]))
+
+    def _frame_changed(self, frame: int) -> None:
+        self.graph_view.set_current_node(self.doc.node_at_or_before(frame) if self.doc.has_map else None)
+
+    def select_first_loop(self) -> bool:
+        rows = self.loop_table.proxy.rowCount()
+        if rows:
+            self.loop_table.step(1) if self.loop_table.selected_key() is None else None
+        return rows > 0
+
+    # ==== sessions =========================================================================
+    def is_modified(self) -> bool:
+        return not self.undo_stack.isClean() or self._extra_dirty
+
+    def current_session(self) -> Session:
+        settings = self.doc.describe_settings
+        decisions = self.doc.decisions() if self.doc.has_map else (self._pending_decisions or {})
+        key = self.selected_key()
+        view = {"frame": self.frame_viewer.current_frame, "tab": self.tabs.currentIndex(),
+                "filter": self.loop_table.filter.currentIndex(),
+                "selected": list(key) if key is not None else None}
+        return Session(input_path=str(self.doc.input_path), describe=settings.as_dict() if settings else {},
+                       params=self.doc.params.as_dict(), decisions=decisions, poses_path=self.doc.poses_path,
+                       poses_topic=self.doc.poses_topic, view=view)
+
+    def save_session(self, path: Optional[str] = None) -> bool:
+        if self.doc.input_path is None:
+            return False
+        target = Path(path) if path else (self.doc.session_path or session_path_for(self.doc.input_path))
+        try:
+            self.current_session().save(target)
+        except OSError as exc:
+            self.error(f"Could not save the session to {target}: {exc.strerror or exc}")
+            return False
+        self.doc.session_path = target
+        self.undo_stack.setClean()
+        self._extra_dirty = False
+        autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
+        self._update_title()
+        self._add_recent(str(target))
+        self.statusBar().showMessage(f"Session saved to {target}", 5000)
+        return True
+
+    def save_session_as(self) -> bool:
+        if self.doc.input_path is None:
+            return False
+        start = str(self.doc.session_path or session_path_for(self.doc.input_path))
+        path, _ = QFileDialog.getSaveFileName(self, "Save session", start, "Sessions (*.json)")
+        return self.save_session(path) if path else False
+
+    def autosave(self) -> None:
+        """Write unsaved work to the autosave file (never the user's session file)."""
+        if self.doc.input_path is None or not self.is_modified():
+            return
+        try:
+            self.current_session().save(autosave_path_for(self.doc.input_path))
+        except OSError as exc:
+            self.statusBar().showMessage(f"Autosave failed: {exc}", 8000)
+
+    def _restore_view(self) -> None:
+        view, self._pending_view = self._pending_view, {}
+        if not view:
+            return
+        if isinstance(view.get("tab"), int):
+            self.tabs.setCurrentIndex(view["tab"])
+        if isinstance(view.get("filter"), int):
+            self.loop_table.filter.setCurrentIndex(view["filter"])
+        if isinstance(view.get("frame"), int) and view["frame"] >= 0:
+            self.frame_viewer.show_frame(view["frame"])
+        if isinstance(view.get("selected"), list) and len(view["selected"]) == 2:
+            self.select_loop(tuple(int(f) for f in view["selected"]))
+
+    def maybe_save(self) -> bool:
+        """Ask before unsaved work is dropped; False means stay."""
+        if not self.is_modified() or self.doc.input_path is None:
+            return True
+        answer = QMessageBox.question(
+            self, "Unsaved changes",
+            f"Save your decisions on {self.doc.input_path.name} before closing it?",
+            QMessageBox.Save | QMessageBox.Discard | QMessageBox.Cancel, QMessageBox.Save)
+        if answer == QMessageBox.Save:
+            return self.save_session()
+        if answer == QMessageBox.Discard:
+            autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
+            self.undo_stack.setClean()
+            self._extra_dirty = False
+            return True
+        return False
+
+    # ==== export ===========================================================================
+    def export_graphml(self, path: str) -> bool:
+        if not self.doc.has_map:
+            self.statusBar().showMessage("Nothing to export: run the engine first", 5000)
+            return False
+        try:
+            self.doc.topomap.write_graphml(path, keep_rejected=False)
+        except (InputError, OSError) as exc:
+            self.error(f"Export failed: {exc}")
+            return False
+        self.statusBar().showMessage(f"Corrected graph written to {path}", 6000)
+        return True
+
+    def export_graphml_dialog(self) -> None:
+        if not self.doc.has_map:
+            return
+        start = str(Path(self.doc.input_path).with_suffix(".graphml"))
+        path, _ = QFileDialog.getSaveFileName(self, "Export corrected graph", start, "GraphML (*.graphml)")
+        if path:
+            self.export_graphml(path)
+
+    def export_graph_png(self, path: str) -> bool:
+        ok = self.graph_view.plot.grab().save(path)
+        if not ok:
+            self.error(f"Could not write {path}")
+        return bool(ok)
+
+    def export_png_dialog(self) -> None:
+        start = str(Path(self.doc.input_path or "graph").with_suffix(".png"))
+        path, _ = QFileDialog.getSaveFileName(self, "Export graph picture", start, "PNG (*.png)")
+        if path:
+            self.export_graph_png(path)
+
+    def export_plot_dialog(self) -> None:
+        if not self.doc.has_map:
+            return
+        from engine.plots import plot_map
+
+        start = str(Path(self.doc.input_path).with_suffix(".map.png"))
+        path, _ = QFileDialog.getSaveFileName(self, "Export evaluation plot", start, "PNG (*.png)")
+        if path:
+            try:
+                plot_map(self.doc.topomap, self.doc.poses, self.doc.evaluation, path)
+            except (InputError, OSError) as exc:
+                self.error(f"Export failed: {exc}")
+
+    # ==== messages, title, recent files ===================================================
+    def error(self, message: str) -> None:
+        self._last_error = message
+        self.statusBar().showMessage(message, 10000)
+        if self.interactive:
+            QMessageBox.critical(self, "panotopo", message)
+        else:
+            print(f"panotopo: {message}", file=sys.stderr)
+
+    def warn(self, message: str) -> None:
+        self.statusBar().showMessage(message, 10000)
+        if self.interactive:
+            QMessageBox.warning(self, "panotopo", message)
+        else:
+            print(f"panotopo: {message}", file=sys.stderr)
+
+    def _ask_yes_no(self, title: str, text: str) -> bool:
+        if not self.interactive:
+            return False
+        return QMessageBox.question(self, title, text, QMessageBox.Yes | QMessageBox.No,
+                                    QMessageBox.Yes) == QMessageBox.Yes
+
+    def _update_title(self, *_args) -> None:
+        name = Path(self.doc.input_path).name if self.doc.input_path else "no recording"
+        if self.doc.session_path:
+            name += f" — {Path(self.doc.session_path).name}"
+        self.setWindowTitle(f"{name}[*] — panotopo")
+        self.setWindowModified(self.is_modified())
+
+    def _update_summary(self) -> None:
+        if not self.doc.has_map:
+            self.summary_label.setText("")
+            return
+        rows = self.doc.loop_rows()
+        undecided = sum(r.status == "auto" for r in rows)
+        self.summary_label.setText(f"{self.doc.node_count()} nodes · {len(rows)} loops · {undecided} undecided")
+        self._update_title()
+
+    def _update_actions(self, *_args) -> None:
+        has_map = self.doc.has_map
+        running = self.runner.running
+        for a in (self.export_action, self.export_png_action, self.export_plot_action, self.manual_action,
+                  self.label_action):
+            a.setEnabled(has_map)
+        self.run_action.setEnabled(self.doc.input_path is not None)
+        self.cancel_action.setEnabled(running)
+        self.save_action.setEnabled(self.doc.input_path is not None)
+        self.save_as_action.setEnabled(self.doc.input_path is not None)
+        self._update_title()
+
+    def _last_dir(self) -> str:
+        return str(self.settings.value("last_dir", str(Path.home())))
+
+    def recent_files(self) -> list[str]:
+        value = self.settings.value("recent", [])
+        if isinstance(value, str):
+            value = [value]
+        return [str(v) for v in (value or [])]
+
+    def _add_recent(self, path: str) -> None:
+        path = str(Path(path).resolve())
+        recent = [path] + [r for r in self.recent_files() if r != path]
+        self.settings.setValue("recent", recent[:MAX_RECENT])
+        self.settings.setValue("last_dir", str(Path(path).parent))
+        self._rebuild_recent_menu()
+
+    def _rebuild_recent_menu(self) -> None:
+        self.recent_menu.clear()
+        recent = self.recent_files()
+        for path in recent:
+            action = self.recent_menu.addAction(path)
+            action.triggered.connect(lambda checked=False, p=path: self.open_path(p))
+        if not recent:
+            self.recent_menu.addAction("(none)").setEnabled(False)
+
+    def show_shortcuts(self) -> None:
+        from .shortcuts_dialog import ShortcutsDialog
+
+        ShortcutsDialog(self).exec()
+
+    def show_about(self) -> None:
+        from engine import __version__
+
+        QMessageBox.about(self, "About panotopo",
+                          f"<b>panotopo {__version__}</b><br>Topological maps from 360-degree recordings: "
+                          "panorama shift, visual place recognition, curated loop closures, GraphML out.")
+
+    # ==== drag and drop, closing ============================================================
+    def dragEnterEvent(self, event: QDragEnterEvent) -> None:
+        if event.mimeData().hasUrls() and any(u.isLocalFile() for u in event.mimeData().urls()):
+            event.acceptProposedAction()
+
+    def dropEvent(self, event: QDropEvent) -> None:
+        paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
+        if paths:
+            event.acceptProposedAction()
+            QTimer.singleShot(0, lambda: self.open_path(paths[0]))
+
+    def closeEvent(self, event: QCloseEvent) -> None:
+        if not self.maybe_save():
+            event.ignore()
+            return
+        self.shutdown()
+        if self.interactive:
+            self.settings.setValue("window/geometry", self.saveGeometry())
+        event.accept()
+
+    def shutdown(self) -> None:
+        """Stop the worker thread and timers and release the recording."""
+        self.autosave_timer.stop()
+        self.frame_viewer.stop_play()
+        self.runner.stop()
+        self.doc.close()
+
+
+def _describe_settings(data: dict, default_options: dict):
+    from engine.pipeline import DescribeSettings
+
+    known = set(DescribeSettings.__dataclass_fields__)
+    values = {k: v for k, v in data.items() if k in known}
+    if not values.get("options") and default_options:
+        values["options"] = dict(default_options)
+    try:
+        return DescribeSettings(**values)
+    except TypeError:
+        raise InputError("the session's describe settings are malformed") from None
+
+
+def _duration(seconds: float) -> str:
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    m, s = divmod(seconds, 60)
+    if m < 60:
+        return f"{m} min {s:02d} s"
+    h, m = divmod(m, 60)
+    return f"{h} h {m:02d} min"

@@ -1,0 +1,43 @@
+"""Colours, pens and the pyqtgraph settings shared by every view."""
+
+from __future__ import annotations
+
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+
+# Images are numpy (row, column, channel); no OpenGL (works on any machine, offscreen too).
+pg.setConfigOptions(imageAxisOrder="row-major", useOpenGL=False, antialias=True)
+
+# One colour per loop status, used by the graph, the matrix, the table and the legend.
+STATUS_COLORS = {
+    "auto": "#f39c12",       # orange: waits for a decision
+    "confirmed": "#27ae60",  # green
+    "rejected": "#c0392b",   # red, drawn faint and dashed
+    "manual": "#2e86de",     # blue
+}
+STATUS_LABELS = {
+    "auto": "candidate (auto)",
+    "confirmed": "confirmed",
+    "rejected": "rejected",
+    "manual": "manual",
+}
+SEQUENTIAL_COLOR = "#7f8c8d"
+NODE_COLOR = "#34495e"
+CURRENT_COLOR = "#e84393"
+SELECTED_COLOR = "#8e44ad"
+CANONICAL_COLOR = "#e84393"
+
+
+def status_pen(status: str, width: float = 2.0, selected: bool = False):
+    color = pg.mkColor(STATUS_COLORS.get(status, "#000"))
+    if status == "rejected":
+        color.setAlpha(150)
+        return pg.mkPen(color, width=width, style=Qt.DashLine)
+    return pg.mkPen(color, width=width * (2 if selected else 1))
+
+
+def panorama_view() -> pg.ViewBox:
+    """A ViewBox that shows an image with row 0 on top and square pixels."""
+    view = pg.ViewBox(lockAspect=True, invertY=True, enableMenu=False)
+    view.setDefaultPadding(0.0)
+    return view

@@ -1,0 +1,416 @@
+"""The real main window driven through whole sessions on a small synthetic recording.
+
+Runs on Qt's offscreen platform (tests/conftest.py). The engine is real: the
+embedded descriptor at a small input size, real videos and bags. Modal message
+boxes are replaced by recorders (QMessageBox only, never our code).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import networkx as nx
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+
+from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from PySide6.QtWidgets import QMessageBox  # noqa: E402
+
+from engine.session import Session, autosave_path_for, session_path_for  # noqa: E402
+from gui.main_window import MainWindow  # noqa: E402
+
+OPTIONS = {"input_height": 64}   # small descriptor input: fast, still the real model
+METHOD = "shift-simple"          # gives loops on this short recording
+RUN_TIMEOUT = 120_000
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    from engine.synth import make_recording, write_recording
+
+    out = tmp_path_factory.mktemp("rec")
+    rec = make_recording(route="loop", look="indoor", width=256, height=128, fps=2.0, max_frames=160)
+    paths = write_recording(rec, out, formats=("video", "poses", "ros1"))
+    return paths
+
+
+@pytest.fixture(scope="module")
+def cache_root(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("cache"))
+
+
+@pytest.fixture
+def dialogs(monkeypatch):
+    """Record message boxes instead of blocking on them; answers can be queued."""
+    calls = _Calls()
+    answers = calls.answers
+
+    def record(kind, default):
+        def box(parent, title, text, *args, **kwargs):
+            calls.append((kind, text))
+            return answers.pop(0) if answers else default
+        return box
+
+    monkeypatch.setattr(QMessageBox, "critical", record("critical", QMessageBox.Ok))
+    monkeypatch.setattr(QMessageBox, "warning", record("warning", QMessageBox.Ok))
+    monkeypatch.setattr(QMessageBox, "information", record("information", QMessageBox.Ok))
+    monkeypatch.setattr(QMessageBox, "question", record("question", QMessageBox.Discard))
+    return calls
+
+
+class _Calls(list):
+    """(kind, text) of each message box shown; ``answers`` are returned in order."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.answers: list = []
+
+
+@pytest.fixture
+def make_window(qtbot, tmp_path, cache_root, dialogs):
+    windows = []
+
+    def make() -> MainWindow:
+        settings = QSettings(str(tmp_path / "settings.ini"), QSettings.IniFormat)
+        w = MainWindow(settings=settings, cache_root=cache_root, describe_options=OPTIONS)
+        qtbot.addWidget(w)
+        w.params_panel.method.setCurrentIndex(w.params_panel.method.findData(METHOD))
+        w.resize(1400, 900)
+        w.show()
+        windows.append(w)
+        return w
+
+    yield make
+    for w in windows:  # never leave a thread running, never block on a question
+        w.undo_stack.setClean()
+        w._extra_dirty = False
+        w.shutdown()
+
+
+def open_and_run(qtbot, window: MainWindow, path) -> None:
+    with qtbot.waitSignal(window.mapReady, timeout=RUN_TIMEOUT):
+        assert window.open_path(str(path))
+
+
+def statuses(window: MainWindow) -> dict:
+    return {r.key: r.status for r in window.doc.loop_rows()}
+
+
+def copy_recording(recording, tmp_path: Path) -> Path:
+    """The shared video (its descriptors stay cached); sessions next to it are removed after each test."""
+    return Path(recording["video"])
+
+
+@pytest.fixture(autouse=True)
+def no_sidecars_left(recording):
+    yield
+    for p in (recording["video"], recording["ros1"]):
+        session_path_for(p).unlink(missing_ok=True)
+        autosave_path_for(p).unlink(missing_ok=True)
+
+
+def test_whole_session_open_run_curate_undo_save_reopen_export(qtbot, make_window, recording, tmp_path, dialogs):
+    video = copy_recording(recording, tmp_path)
+    w = make_window()
+    open_and_run(qtbot, w, video)
+
+    # Every view is filled.
+    rows = w.doc.loop_rows()
+    assert len(rows) >= 3, "the test recording should give a few loop candidates"
+    assert w.loop_table.proxy.rowCount() == len(rows)
+    assert w.frame_viewer.current_frame >= 0
+    assert w.graph_view.x.size == w.doc.node_count() > 0
+    assert w.doc.similarity().shape == (w.doc.node_count(),) * 2
+    assert w.doc.poses is not None, "poses.csv next to the recording is loaded"
+    assert w.doc.evaluation is not None
+    assert not w.isWindowModified()
+
+    # Keyboard curation on the table: confirm the first, reject the next (auto-advance).
+    w.loop_table.step(1)
+    first = w.loop_table.selected_key()
+    assert w.pair_view.key == first
+    qtbot.keyClick(w.loop_table.view, Qt.Key_C)
+    assert statuses(w)[first] == "confirmed"
+    second = w.loop_table.selected_key()
+    assert second != first
+    qtbot.keyClick(w.loop_table.view, Qt.Key_R)
+    assert statuses(w)[second] == "rejected"
+    assert w.isWindowModified() and "[*]" in w.windowTitle()
+
+    # Undo and redo.
+    w.undo_stack.undo()
+    assert statuses(w)[second] == "auto"
+    w.undo_stack.redo()
+    assert statuses(w)[second] == "rejected"
+
+    # Save, close, reopen: the decisions come back.
+    assert w.save_session()
+    session_file = session_path_for(video)
+    assert session_file.is_file() and not w.isWindowModified()
+    w.close()
+    assert not w.runner.running
+
+    w2 = make_window()
+    open_and_run(qtbot, w2, session_file)
+    assert statuses(w2)[first] == "confirmed"
+    assert statuses(w2)[second] == "rejected"
+    assert not w2.isWindowModified()
+
+    # Export the corrected graph: rejected left out, confirmed kept with its status.
+    out = tmp_path / "corrected.graphml"
+    assert w2.export_graphml(str(out))
+    g = nx.read_graphml(out)
+    frame_node = {int(d["frame"]): n for n, d in g.nodes(data=True)}
+    a, b = (frame_node[f] for f in first)
+    assert g.has_edge(a, b) and g.edges[a, b]["status"] == "confirmed"
+    c, d = (frame_node[f] for f in second)
+    assert not g.has_edge(c, d)
+    assert all(e["status"] != "rejected" for _, _, e in g.edges(data=True))
+    png = tmp_path / "graph.png"
+    assert w2.export_graph_png(str(png)) and png.stat().st_size > 1000
+    assert not [c for c in dialogs if c[0] == "critical"]
+
+
+def test_parameter_change_rebuilds_at_once_and_keeps_decisions(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    w.loop_table.step(1)
+    key = w.loop_table.selected_key()
+    qtbot.keyClick(w.loop_table.view, Qt.Key_C)
+    before = w.doc.topomap
+    old_th = w.params_panel.loop_sim_th.value()
+
+    with qtbot.waitSignal(w.mapReady, timeout=5000):
+        w.params_panel.loop_sim_th.setValue(old_th - 0.03)
+    assert w.doc.topomap is not before
+    assert w.doc.params.loop_sim_th == pytest.approx(old_th - 0.03)
+    assert statuses(w)[key] == "confirmed"
+    assert len(w.doc.loop_rows()) >= len(before.loops())
+
+    w.undo_stack.undo()  # the parameter change is undone, the decision stays
+    assert w.params_panel.loop_sim_th.value() == pytest.approx(old_th)
+    assert statuses(w)[key] == "confirmed"
+    w.undo_stack.undo()  # then the decision
+    assert statuses(w)[key] == "auto"
+
+
+def test_switching_to_simple_describes_again_and_keeps_decisions(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    w.loop_table.step(1)
+    key = w.loop_table.selected_key()
+    qtbot.keyClick(w.loop_table.view, Qt.Key_R)
+    decisions = w.doc.decisions()
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("simple"))
+    assert w.doc.descs.meta["shift"] is False
+    assert w.doc.params.method == "simple"
+    # The rejection is kept (applied, or carried as unapplied when simple has no such loop).
+    assert decisions["loops"][0] in w.doc.decisions()["loops"]
+    assert key in statuses(w) or w.doc.topomap.unapplied["loops"]
+
+
+def test_cancelled_run_leaves_map_and_decisions_untouched(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    w.loop_table.step(1)
+    qtbot.keyClick(w.loop_table.view, Qt.Key_C)
+    topomap, decisions = w.doc.topomap, w.doc.decisions()
+
+    w.params_panel.interval.setValue(0.5)  # not cached: a real describe that we cancel
+    with qtbot.waitSignal(w.runCancelled, timeout=RUN_TIMEOUT):
+        w.start_run()
+        assert w.runner.running
+        w.cancel_run()
+    assert not w.runner.running
+    assert w.doc.topomap is topomap
+    assert w.doc.decisions() == decisions
+    assert not w.progress_bar.isVisible()
+
+
+def test_closing_during_a_run_stops_the_thread(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    assert w.open_path(str(copy_recording(recording, tmp_path)))
+    w.params_panel.interval.setValue(0.75)
+    w.start_run()
+    thread = w.runner._thread
+    assert thread is not None and thread.isRunning()
+    w.close()
+    assert not thread.isRunning()
+    assert not w.runner.running
+
+
+@pytest.mark.parametrize("name, content", [
+    ("broken.mp4", b"this is not a video"),
+    ("broken.panotopo.json", b"{ half a session"),
+    ("broken.npz", b"PK\x03\x04 not a zip"),
+    ("missing.bag", None),
+])
+def test_bad_input_shows_a_message_not_a_crash(qtbot, make_window, tmp_path, dialogs, name, content):
+    w = make_window()
+    path = tmp_path / name
+    if content is not None:
+        path.write_bytes(content)
+    assert not w.open_path(str(path))
+    kinds = [k for k, _ in dialogs]
+    assert kinds == ["critical"]
+    assert name in dialogs[0][1] or str(path) in dialogs[0][1]
+    assert "Traceback" not in dialogs[0][1]
+    assert not w.doc.has_map and not w.runner.running
+
+
+def test_manual_loop_label_and_their_undo(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    frames = w.doc.node_frames()
+    key = (int(frames[3]), int(frames[20]))
+    assert w.doc.loop_attrs(key) is None
+    assert w.add_manual_loop(key)
+    assert statuses(w)[key] == "manual"
+    assert w.loop_table.selected_key() == key
+    w.remove_manual_loop(key)
+    assert key not in statuses(w)
+    w.undo_stack.undo()
+    assert statuses(w)[key] == "manual"
+    w.undo_stack.undo()
+    assert key not in statuses(w)
+
+    w.set_label(int(frames[5]), "kitchen")
+    assert w.doc.node_data(w.doc.node_id(5))["label"] == "kitchen"
+    assert len(w.graph_view.label_items) == 1
+    w.undo_stack.undo()
+    assert w.doc.node_data(w.doc.node_id(5)).get("label", "") == ""
+    assert w.graph_view.label_items == []
+
+
+def test_graph_and_matrix_clicks_select(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    qtbot.wait(50)
+    # A node click jumps to that node's frame.
+    k = w.doc.node_count() // 2
+    pos = w.graph_view.node_screen_pos(k)
+    qtbot.mouseClick(w.graph_view.plot.viewport(), Qt.LeftButton, pos=pos)
+    assert w.frame_viewer.current_frame == int(w.doc.node_frames()[k])
+
+    # A matrix cell with a loop selects it in the table; one without shows the pair.
+    w.tabs.setCurrentWidget(w.similarity_view)
+    qtbot.wait(50)
+    row = w.doc.loop_rows()[0]
+    w.similarity_view._clicked(_FakeClick(w.similarity_view.cell_scene_pos(row.index_u, row.index_v)))
+    assert w.loop_table.selected_key() == row.key
+    w.similarity_view._clicked(_FakeClick(w.similarity_view.cell_scene_pos(0, 2)))
+    assert w.loop_table.selected_key() is None
+    assert w.pair_view.key == (int(w.doc.node_frames()[0]), int(w.doc.node_frames()[2]))
+    assert w.pair_view.add_button.isEnabled()
+
+
+class _FakeClick:
+    """What pyqtgraph's scene passes to sigMouseClicked (its real event needs a drag state machine)."""
+
+    def __init__(self, scene_pos):
+        self._pos = scene_pos
+        self.accepted = False
+
+    def button(self):
+        return Qt.LeftButton
+
+    def scenePos(self):
+        return self._pos
+
+    def modifiers(self):
+        return Qt.NoModifier
+
+    def accept(self):
+        self.accepted = True
+
+
+def test_live_evaluation_follows_decisions(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    ev = w.doc.evaluation
+    truth = ev.loop_truth
+    row = next(r for r in w.doc.loop_rows() if truth.get((r.u, r.v)) == "TP")
+    w.loop_table.select_key(row.key)
+    qtbot.keyClick(w.loop_table.view, Qt.Key_N)
+    assert w.doc.evaluation.tp == ev.tp - 1
+    assert w.doc.evaluation.fn == ev.fn + 1
+    assert w.eval_panel.values["tp"].text() == f"<b>{ev.tp - 1}</b>"
+
+
+def test_autosave_restores_unsaved_decisions(qtbot, make_window, recording, tmp_path, dialogs):
+    video = copy_recording(recording, tmp_path)
+    w = make_window()
+    open_and_run(qtbot, w, video)
+    w.loop_table.step(1)
+    key = w.loop_table.selected_key()
+    qtbot.keyClick(w.loop_table.view, Qt.Key_C)
+    w.autosave_timer.timeout.emit()  # what the 30 s timer does
+    auto = autosave_path_for(video)
+    assert auto.is_file() and not session_path_for(video).exists()
+    assert Session.load(auto).decisions["loops"][0]["status"] == "confirmed"
+    w.shutdown()  # as if the app had crashed: nothing saved
+
+    w2 = make_window()
+    dialogs.answers.append(QMessageBox.Yes)  # "Restore unsaved work?"
+    open_and_run(qtbot, w2, video)
+    assert statuses(w2)[key] == "confirmed"
+    assert w2.isWindowModified()
+
+
+def test_close_asks_before_losing_work(qtbot, make_window, recording, tmp_path, dialogs):
+    video = copy_recording(recording, tmp_path)
+    w = make_window()
+    open_and_run(qtbot, w, video)
+    w.loop_table.step(1)
+    qtbot.keyClick(w.loop_table.view, Qt.Key_Y)
+    dialogs.answers.append(QMessageBox.Cancel)
+    assert not w.close()  # Cancel keeps the window
+    assert w.isVisible() and w.isWindowModified()
+    dialogs.answers.append(QMessageBox.Save)
+    assert w.close()
+    assert session_path_for(video).is_file()
+    assert [k for k, _ in dialogs].count("question") == 2
+
+
+def test_bag_with_topic_and_pose_topic(qtbot, make_window, recording, tmp_path):
+    from engine.sources import list_image_topics, list_pose_topics
+
+    from gui.open_dialog import BagTopicDialog
+
+    bag = recording["ros1"]
+    images, poses = list_image_topics(bag), list_pose_topics(bag)
+    dialog = BagTopicDialog(str(bag), images, poses)
+    qtbot.addWidget(dialog)
+    chosen_image, chosen_pose = dialog.chosen()
+    assert chosen_image == max(images, key=lambda t: t[2])[0]
+    assert chosen_pose == (poses[0][0] if poses else None)
+
+    w = make_window()
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        assert w.open_path(str(bag), topic=chosen_image, pose_topic=chosen_pose)
+    assert w.doc.source.frame_count == 160
+    if chosen_pose:
+        assert w.doc.poses is not None and w.doc.poses_topic == chosen_pose
+    assert w.doc.node_count() > 0
+
+
+def test_recent_files_and_frame_keys(qtbot, make_window, recording, tmp_path):
+    video = copy_recording(recording, tmp_path)
+    w = make_window()
+    open_and_run(qtbot, w, video)
+    assert w.recent_files()[0] == str(video.resolve())
+    assert any(a.text() == str(video.resolve()) for a in w.recent_menu.actions())
+    w.frame_viewer.show_frame(10)
+    qtbot.keyClick(w.frame_viewer, Qt.Key_Right)
+    assert w.frame_viewer.current_frame == 11
+    qtbot.keyClick(w.frame_viewer, Qt.Key_Left)
+    qtbot.keyClick(w.frame_viewer, Qt.Key_Left)
+    assert w.frame_viewer.current_frame == 9
+    qtbot.keyClick(w.frame_viewer, Qt.Key_End)
+    assert w.frame_viewer.current_frame == w.doc.source.frame_count - 1
+    assert "frame" in w.frame_viewer.info.text()
+    frame = w.frames.get(9)
+    assert frame is not None and 0 <= frame.shift < frame.rgb.shape[1]
