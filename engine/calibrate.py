@@ -103,3 +103,27 @@ def node_threshold(vectors: np.ndarray) -> float:
         return 0.9
     step = np.einsum("ij,ij->i", v[:-1], v[1:])
     return float(0.5 * (float(np.median(step)) + 1.0))
+
+
+# Loop threshold of the paper's methods: this many background spreads above the median.
+LOOP_Z = 3.5
+
+
+def loop_threshold(vectors: np.ndarray, exclude: int = 5, k: float = LOOP_Z) -> float:
+    """Automatic loop_sim_th for the paper's methods: median + k * spread of the
+    similarities between temporally distant samples (almost all different places)."""
+    v = np.asarray(vectors, dtype=np.float32)
+    m = v.shape[0]
+    if m <= exclude + 1:
+        return 0.9
+    rng = np.random.default_rng(0)
+    cols = np.arange(m) if m <= _SAMPLE else np.sort(rng.choice(m, _SAMPLE, replace=False))
+    sims = v @ v[cols].T
+    far = np.abs(np.arange(m)[:, None] - cols[None, :]) > exclude
+    mu, sd = robust_stats(sims[far].astype(np.float64))
+    return float(min(mu + k * sd, 0.99))
+
+
+def paper_thresholds(vectors: np.ndarray, exclude: int = 5) -> dict:
+    """node_sim_th and loop_sim_th for simple / shift-simple / ours, from the recording."""
+    return {"node_sim_th": node_threshold(vectors), "loop_sim_th": loop_threshold(vectors, exclude)}

@@ -242,7 +242,8 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p = sub.add_parser("map", parents=[common], help="build a topological map (GraphML) from a recording")
     p.add_argument("input", help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz")
     p.add_argument("-o", "--output", required=True, help="output .graphml")
-    p.add_argument("--method", default="ours", choices=METHODS, help="loop detection method (default: %(default)s)")
+    p.add_argument("--method", default=MapParams().method, choices=METHODS,
+                   help="loop detection method (default: %(default)s; 'ours' is the paper's)")
     _add_sampling(p)
     p.add_argument("--node-sim-th", type=float, help="node similarity threshold (default: the descriptor's)")
     p.add_argument("--loop-sim-th", type=float, help="loop similarity threshold (default: the descriptor's)")

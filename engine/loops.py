@@ -59,6 +59,11 @@ def detect_loops(node_vectors: np.ndarray, params: MapParams) -> list[LoopCandid
     if v.ndim != 2:
         raise InputError(f"node descriptors must be a 2-D array, got shape {v.shape}")
     _check_params(params)
+    if params.method == "verified":
+        # Without the recording's column signatures: no yaw verification (see loops_verified).
+        from .loops_verified import verified_loops
+
+        return verified_loops(v, params)
     if params.method == "ours":
         a, b, counts = _ours_pairs(v, params)
     else:

@@ -5,14 +5,23 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from typing import Optional
 
-METHODS = ("simple", "shift-simple", "ours")
+METHODS = ("simple", "shift-simple", "ours", "verified")
 # Methods whose descriptors are computed on panorama-shifted frames.
-SHIFTED_METHODS = ("shift-simple", "ours")
+SHIFTED_METHODS = ("shift-simple", "ours", "verified")
+# "verified" (beyond the paper, engine.loops_verified): thresholds calibrated from the
+# recording itself, sequence support, yaw-aligned verification; loop_sim_th, window_size
+# and count_th are not used by it, and node_sim_th None means "calibrate from the recording".
+METHOD_DESCRIPTIONS = {
+    "simple": "Simple threshold: any pair with similarity >= loop_sim_th (no panorama shift)",
+    "shift-simple": "Panorama shift + simple threshold",
+    "ours": "Panorama shift + spatial consistency check (the paper's method)",
+    "verified": "Calibrated scores + sequence support + yaw-aligned verification (beyond the paper)",
+}
 
 
 @dataclass(frozen=True)
 class MapParams:
-    method: str = "ours"
+    method: str = "verified"
     node_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
     loop_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
     window_size: int = 5

@@ -7,7 +7,7 @@ re-run whenever a node or loop parameter changes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Iterable, Iterator, Optional
 
@@ -154,13 +154,24 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
 
     if len(descs) == 0:
         raise InputError("no descriptors to map")
+    if params.method == "verified" and params.node_sim_th is None:
+        from .calibrate import node_threshold
+
+        params = replace(params, node_sim_th=node_threshold(descs.vectors))
     p = params.resolved(descriptor_defaults(descs))
     if params.uses_shift != bool(descs.meta.get("shift", True)):
         wanted = "panorama-shifted" if params.uses_shift else "unshifted"
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
                          f"{'without' if not params.uses_shift else 'with'} --no-shift")
     node_rows = make_nodes(descs.vectors, p.node_sim_th)
-    loops = detect_loops(descs.vectors[node_rows], p)
+    if p.method == "verified":
+        from .loops_verified import verified_loops
+
+        columns = None if descs.columns is None else descs.columns[node_rows]
+        loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
+                               int(descs.meta.get("frame_width", 0)))
+    else:
+        loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}
     return TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
                          extra_meta=extra)
