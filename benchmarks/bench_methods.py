@@ -28,15 +28,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
-from engine.benchmark import Case, Row, describe_case, evaluate_methods, markdown_table, sum_rows
-from engine.calibrate import paper_thresholds
-from engine.params import MapParams
+from engine.benchmark import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
+                              markdown_table, sum_rows)
 from engine.synth import ROUTES
 
 RESULTS = Path(__file__).resolve().parent / "results"
 ROUTE_TYPES = tuple(r for r in ROUTES if r != "demo")
 LOOKS = ("indoor", "outdoor")
-PAPER_METHODS = ("simple", "shift-simple", "ours")
 ALL_METHODS = PAPER_METHODS + ("verified",)
 
 
@@ -55,11 +53,6 @@ def case_for(route: str, look: str, seed: int) -> Case:
     return Case(route, look, seed, **DISTURBANCES[seed % 5])
 
 
-def params_for(described, methods) -> dict:
-    th = paper_thresholds(described.by_shift[True].vectors)
-    return {m: (MapParams(**th) if m in PAPER_METHODS else MapParams()) for m in methods}
-
-
 def run(seeds, methods, cache: Path, input_height: int) -> list[Row]:
     rows: list[Row] = []
     for seed in seeds:
@@ -68,7 +61,7 @@ def run(seeds, methods, cache: Path, input_height: int) -> list[Row]:
                 case = case_for(route, look, seed)
                 t0 = time.perf_counter()
                 d = describe_case(case, (True, False), input_height=input_height, cache_dir=cache)
-                rows += evaluate_methods(d, methods, params_for(d, methods))
+                rows += evaluate_methods(d, methods, calibrated_params(d, methods))
                 print(f"{case.name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     return rows
 

@@ -143,14 +143,31 @@ def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
     return rows
 
 
+PAPER_METHODS = ("simple", "shift-simple", "ours")
+
+
+def calibrated_params(described: Described, methods: Iterable[str] = METHODS) -> dict:
+    """MapParams per method: the paper's three share thresholds calibrated from the
+    recording's shifted descriptors (``calibrate.paper_thresholds``); others use their defaults."""
+    from .calibrate import paper_thresholds
+
+    th = paper_thresholds(described.by_shift[True].vectors)
+    return {m: (MapParams(**th) if m in PAPER_METHODS else MapParams()) for m in methods}
+
+
 def evaluate_route(route: str, look: str, seed: int = 0, methods: Iterable[str] = METHODS,
                    cache_dir: Optional[Path] = None, input_height: int = 128, width: int = 256,
-                   params: Optional[dict] = None, **case_options) -> list[Row]:
-    """Render, describe and map one route with every method: rows of the results table."""
+                   params: "Optional[dict] | str" = "calibrated", **case_options) -> list[Row]:
+    """Render, describe and map one route with every method: rows of the results table.
+
+    ``params``: MapParams per method, None for every method's defaults, or "calibrated"
+    (``calibrated_params``)."""
     methods = tuple(methods)
     case = Case(route, look, seed, width=width, **case_options)
-    shifts = sorted({m != "simple" for m in methods}, reverse=True)
+    shifts = sorted({m != "simple" for m in methods} | {True}, reverse=True)
     described = describe_case(case, shifts, input_height=input_height, cache_dir=cache_dir)
+    if params == "calibrated":
+        params = calibrated_params(described, methods)
     return evaluate_methods(described, methods, params)
 
 

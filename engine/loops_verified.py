@@ -47,8 +47,9 @@ _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
 @dataclass(frozen=True)
 class VerifiedThresholds:
     seq_z: float = 3.0        # sequence support (mean z along the diagonal)
-    seq_verify_z: float = 1.0  # verification needed with sequence support
-    single_z: float = 5.0     # a lone pair (crossing) needs this z-score ...
+    seq_verify_z: float = 1.5  # verification needed with sequence support ...
+    seq_sum_z: float = 5.5    # ... and sequence + verification together
+    single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
     single_verify_z: float = 3.0  # ... and this verification
 
 
@@ -139,7 +140,8 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
     if ps.a.size == 0:
         return np.zeros(0, np.int64)
     if ps.verify is not None:
-        with_seq = (ps.seq >= th.seq_z) & (ps.verify >= th.seq_verify_z)
+        with_seq = ((ps.seq >= th.seq_z) & (ps.verify >= th.seq_verify_z)
+                    & (ps.seq + ps.verify >= th.seq_sum_z))
         single = (ps.z >= th.single_z) & (ps.verify >= th.single_verify_z)
     else:  # no signatures: no verification, so ask more of both rules
         with_seq = ps.seq >= th.seq_z + 1.0

@@ -1,0 +1,74 @@
+"""The ``verified`` method end to end on synthetic recordings, its yaw, fallback and defaults."""
+
+import numpy as np
+import pytest
+
+from engine.benchmark import Case, describe_case
+from engine.cli import build_parser
+from engine.descriptors.base import Descriptors
+from engine.evaluate import evaluate
+from engine.graph import TopoMap
+from engine.loops import detect_loops
+from engine.nodes import make_nodes
+from engine.params import METHODS, MapParams
+from engine.pipeline import build_map
+
+
+@pytest.fixture(scope="module", params=[("crossing", "outdoor"), ("reverse", "indoor")], ids=lambda p: "-".join(p))
+def described(request):
+    route, look = request.param
+    return describe_case(Case(route, look, seed=0, people=2), shifts=(True,), input_height=128)
+
+
+def heading_change_deg(topomap: TopoMap, poses, i: int, j: int) -> float:
+    yaw = np.degrees(np.interp(topomap.stamps(), poses.t, poses.yaw))
+    return float((yaw[j] - yaw[i] + 180.0) % 360.0 - 180.0)
+
+
+def test_default_method_is_verified_and_ours_stays_selectable():
+    assert MapParams().method == "verified"
+    assert {"simple", "shift-simple", "ours", "verified"} <= set(METHODS)
+    args = build_parser().parse_args(["map", "x.mp4", "-o", "y.graphml"])
+    assert args.method == MapParams().method
+    assert build_parser().parse_args(["map", "x.mp4", "-o", "y.graphml", "--method", "ours"]).method == "ours"
+
+
+def test_verified_closes_the_revisit_without_false_loops(described):
+    descs = described.by_shift[True]
+    topomap = build_map(descs, MapParams())
+    ev = evaluate(topomap, described.poses, neighbor_node_num=5)
+    assert topomap.meta["method"] == "verified"
+    assert ev.fp == 0
+    assert ev.events_total >= 1 and ev.events_found == ev.events_total
+
+
+def test_loop_arcs_carry_the_true_relative_heading(described, tmp_path):
+    topomap = build_map(described.by_shift[True], MapParams())
+    loops = topomap.loops()
+    assert loops
+    for u, v, attrs in loops:
+        i, j = topomap.graph.nodes[u]["index"], topomap.graph.nodes[v]["index"]
+        err = (attrs["yaw"] - heading_change_deg(topomap, described.poses, i, j) + 180.0) % 360.0 - 180.0
+        assert abs(err) < 15.0
+    topomap.write_graphml(tmp_path / "m.graphml")
+    back = TopoMap.read_graphml(tmp_path / "m.graphml")
+    assert all(isinstance(d["yaw"], float) for _, _, d in back.loops())
+
+
+def test_without_column_signatures_it_falls_back_without_yaw(described):
+    d = described.by_shift[True]
+    old = Descriptors(d.stamps, d.frames, d.shifts, d.vectors, dict(d.meta))   # no columns
+    topomap = build_map(old, MapParams())
+    assert all("yaw" not in attrs for _, _, attrs in topomap.loops())
+    ev = evaluate(topomap, described.poses, neighbor_node_num=5)
+    assert ev.fp == 0
+
+
+def test_ours_is_unchanged_by_the_new_default(described):
+    d = described.by_shift[True]
+    p = MapParams(method="ours", node_sim_th=0.75, loop_sim_th=0.5)
+    topomap = build_map(d, p)
+    rows = make_nodes(d.vectors, 0.75)
+    direct = detect_loops(d.vectors[rows], p)
+    got = sorted((topomap.graph.nodes[u]["index"], topomap.graph.nodes[v]["index"]) for u, v, _ in topomap.loops())
+    assert got == sorted((lc.a, lc.b) for lc in direct)
