@@ -30,9 +30,16 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
     app = QApplication.instance() or QApplication([sys.argv[0] if sys.argv else "panotopo"])
     app.setApplicationName("panotopo")
     app.setOrganizationName("panotopo")
+    try:
+        import resources
+
+        app.setDesktopFileName(resources.DESKTOP_FILE_NAME)  # Wayland app id / X11 class: the .desktop entry
+    except ImportError:
+        pass
     window = MainWindow(interactive=screenshot is None)
     if screenshot is not None:
-        window.resize(1600, 1000)
+        ui = window.defaults["ui"]
+        window.resize(int(ui.get("screenshot_width", 1600)), int(ui.get("screenshot_height", 1000)))
     window.show()
 
     if screenshot is None:

@@ -44,6 +44,7 @@ class Document(QObject):
     posesChanged = Signal()
     evaluationChanged = Signal()
     sourceChanged = Signal()      # a new recording opened (or closed)
+    estimatedYaw = Signal(object)  # LoopKey whose yaw was estimated from the images
 
     def __init__(self, parent: Optional[QObject] = None) -> None:
         super().__init__(parent)
@@ -61,11 +62,14 @@ class Document(QObject):
         self.dist_th = 1.0
         self._node_of_frame: dict[int, str] = {}
         self._similarity: Optional[np.ndarray] = None
+        # Relative yaws estimated from the images for pairs whose loop has none (by key).
+        self.estimated_yaws: dict[LoopKey, float] = {}
 
     # -- whole-document changes ------------------------------------------------
     def set_source(self, path: Optional[Path], source) -> None:
         if self.source is not None and self.source is not source:
             self.source.close()
+        self.estimated_yaws = {}
         self.input_path = path
         self.source = source
         self.sourceChanged.emit()
@@ -186,6 +190,12 @@ class Document(QObject):
     def pair_similarity(self, k_a: int, k_b: int) -> float:
         sim = self.similarity()
         return float("nan") if sim is None else float(sim[k_a, k_b])
+
+    def note_estimated_yaw(self, key: LoopKey, yaw: float) -> None:
+        """Remember a yaw the pair view estimated, so the table can show it too."""
+        if self.estimated_yaws.get(key) != yaw:
+            self.estimated_yaws[key] = float(yaw)
+            self.estimatedYaw.emit(key)
 
     # -- edits (called by the undo commands only) ------------------------------
     def set_loop_status(self, key: LoopKey, status: str) -> None:

@@ -51,8 +51,8 @@ class FrameViewer(QWidget):
         self.shifted_image = pg.ImageItem()
         self.original_view.addItem(self.original_image)
         self.shifted_view.addItem(self.shifted_image)
-        self.canonical_line = pg.InfiniteLine(angle=90, movable=False,
-                                              pen=pg.mkPen(CANONICAL_COLOR, width=2))
+        # A segment over the image only (an InfiniteLine would cross the empty margins).
+        self.canonical_line = pg.PlotDataItem(pen=pg.mkPen(CANONICAL_COLOR, width=2))
         self.canonical_line.setToolTip("Canonical column: it becomes the left edge of the shifted panorama")
         self.canonical_line.setVisible(False)
         self.original_view.addItem(self.canonical_line)
@@ -100,6 +100,8 @@ class FrameViewer(QWidget):
         layout.addWidget(self.info)
         layout.addWidget(self.canvas, 1)
         layout.addLayout(controls)
+        layout.addStretch(0)
+        self._aspect = 2.0  # width / height of the frames: the canvas is sized to fit them
 
         # Decoding happens after the slider rests for a moment (debounce).
         self._decode_timer = QTimer(self)
@@ -205,12 +207,16 @@ class FrameViewer(QWidget):
         shifted = np.roll(item.rgb, -item.shift, axis=1) if item.shift else item.rgb
         self.shifted_image.setImage(shifted, autoLevels=False, levels=(0, 255))
         h, w = item.rgb.shape[:2]
+        if abs(self._aspect - w / h) > 1e-6:
+            self._aspect = w / h
+            self._fit_canvas()
         for view in (self.original_view, self.shifted_view):
             if view.viewRect().width() < 2 or getattr(view, "_shown_size", None) != (w, h):
                 view.setRange(xRange=(0, w), yRange=(0, h), padding=0.01)
                 view._shown_size = (w, h)
-        self.canonical_line.setPos(item.shift + 0.5)
+        self.canonical_line.setData([item.shift + 0.5] * 2, [0, h])
         self.canonical_line.setVisible(True)
+        self.original_title.setText(f"Original — canonical column {item.shift} marked")
         self.shifted_title.setText(f"Panorama-shifted (rolled left by {item.shift} columns)")
         self._refresh_info()
         self.frameChanged.emit(index)
@@ -231,6 +237,16 @@ class FrameViewer(QWidget):
             if data.get("label"):
                 text += f" &nbsp; · &nbsp; “{data['label']}”"
         self.info.setText(text)
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        self._fit_canvas()
+
+    def _fit_canvas(self) -> None:
+        """As tall as two panoramas at the current width (plus titles): no empty bands."""
+        m = self.layout().contentsMargins()
+        width = max(self.width() - m.left() - m.right(), 50)  # the canvas spans the viewer's width
+        self.canvas.setMaximumHeight(int(2 * width / self._aspect + 70))
 
     def keyPressEvent(self, event: QKeyEvent) -> None:
         key, mods = event.key(), event.modifiers()

@@ -85,10 +85,10 @@ class GraphView(QWidget):
             positions = self.doc.topomap.positions() if self.doc.poses is not None else None
             self.x, self.y = positions if positions is not None else path_layout(self.doc.topomap)
         with_gt = self.doc.poses is not None and self.doc.has_map
-        for axis in ("left", "bottom"):
-            self.plot.getPlotItem().showAxis(axis, with_gt)
         self.plot.setLabel("bottom", "x (m)" if with_gt else "")
         self.plot.setLabel("left", "y (m)" if with_gt else "")
+        for axis in ("left", "bottom"):  # after setLabel, which shows the axis again
+            self.plot.getPlotItem().showAxis(axis, with_gt)
         self.plot.showGrid(x=with_gt, y=with_gt, alpha=0.15)
         self.plot.setTitle("Ground-truth positions" if with_gt else
                            ("Layout of the path (no ground truth loaded)" if self.doc.has_map else ""),

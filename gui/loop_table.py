@@ -12,20 +12,20 @@ from typing import Any, Optional
 from PySide6.QtCore import (QAbstractTableModel, QItemSelectionModel, QModelIndex,
                             QSortFilterProxyModel, Qt, Signal)
 from PySide6.QtGui import QBrush, QColor, QKeyEvent
-from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QHBoxLayout, QHeaderView, QLabel,
+from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QHBoxLayout, QHeaderView, QLabel, QSizePolicy,
                                QTableView, QVBoxLayout, QWidget)
 
 from .document import Document, LoopKey, LoopRow
 from .style import STATUS_COLORS
 
-COLUMNS = ("Query", "Candidate", "Frames", "Similarity", "Windows", "Yaw (°)", "Status")
+COLUMNS = ("Query", "Match", "Frames", "Sim.", "Win.", "Yaw°", "Status")
 COLUMN_TIPS = (
-    "The earlier node of the pair",
-    "The later node of the pair",
+    "Query: the earlier node of the pair",
+    "Match: the later node of the pair (the loop candidate)",
     "Source frames of the two nodes",
-    "Cosine similarity of the two node descriptors",
-    "Spatial consistency: matches in the best candidate window ('ours' only)",
-    "Relative heading between the two panoramas",
+    "Similarity: cosine of the two node descriptors",
+    "Window count: matches in the best candidate window of the spatial consistency check ('ours')",
+    "Relative heading between the two panoramas, in degrees",
     "auto = waiting for a decision; confirmed / rejected by you; manual = added by you",
 )
 STATUS_COLUMN = 6
@@ -58,6 +58,11 @@ class LoopTableModel(QAbstractTableModel):
         self._row_of = {r.key: i for i, r in enumerate(rows)}
         self.endResetModel()
 
+    def yaw_changed(self, key: LoopKey) -> None:
+        row = self._row_of.get(key)
+        if row is not None:
+            self.dataChanged.emit(self.index(row, 5), self.index(row, 5))
+
     def row_of(self, key: LoopKey) -> Optional[int]:
         return self._row_of.get(key)
 
@@ -83,10 +88,13 @@ class LoopTableModel(QAbstractTableModel):
         if role == KEY_ROLE:
             return r.key
         if role == Qt.DisplayRole:
+            if col == 5 and r.yaw is None and r.key in self.doc.estimated_yaws:
+                return f"~{self.doc.estimated_yaws[r.key]:+.1f}"  # estimated from the images
             return self._display(r, col)
         if role == Qt.UserRole:  # sort values
+            yaw = r.yaw if r.yaw is not None else self.doc.estimated_yaws.get(r.key)
             return (r.index_u, r.index_v, r.key[0], _num(r.similarity), r.window_count,
-                    _num(r.yaw), r.status)[col]
+                    _num(yaw), r.status)[col]
         if role == Qt.TextAlignmentRole and col != STATUS_COLUMN:
             return int(Qt.AlignRight | Qt.AlignVCenter)
         if role == Qt.BackgroundRole and col == STATUS_COLUMN:
@@ -173,6 +181,9 @@ class LoopTable(QWidget):
         self.filter.currentIndexChanged.connect(self._filter_changed)
         self.counts = QLabel()
         self.counts.setToolTip("Loops by status")
+        # May be clipped in a narrow panel rather than widen the whole window.
+        self.counts.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
+        self.counts.setAlignment(Qt.AlignRight | Qt.AlignVCenter)
 
         self.view = LoopTableView()
         self.view.setModel(self.proxy)
@@ -193,8 +204,7 @@ class LoopTable(QWidget):
         bar.setContentsMargins(0, 0, 0, 0)
         bar.addWidget(QLabel("Show:"))
         bar.addWidget(self.filter)
-        bar.addStretch(1)
-        bar.addWidget(self.counts)
+        bar.addWidget(self.counts, 1)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(bar)
@@ -204,6 +214,7 @@ class LoopTable(QWidget):
         doc.mapReplaced.connect(self.refresh)
         doc.loopsChanged.connect(self.refresh)
         doc.labelsChanged.connect(self.refresh)
+        doc.estimatedYaw.connect(self.model.yaw_changed)
 
     # -- selection -------------------------------------------------------------------
     def selected_key(self) -> Optional[LoopKey]:
@@ -282,5 +293,5 @@ class LoopTable(QWidget):
         counts = {s: 0 for s in STATUS_COLORS}
         for r in self.model.rows:
             counts[r.status] = counts.get(r.status, 0) + 1
-        parts = [f"<span style='color:{STATUS_COLORS[s]}'>■</span> {counts[s]} {s}" for s in STATUS_COLORS]
+        parts = [f"<span style='color:{STATUS_COLORS[s]}'>■</span>&nbsp;{counts[s]}&nbsp;{s}" for s in STATUS_COLORS]
         self.counts.setText(" &nbsp; ".join(parts))

@@ -35,9 +35,6 @@ from .similarity_view import SimilarityView
 from .worker import RunController, RunJob, RunResult
 
 APP_NAME = "panotopo"
-AUTOSAVE_MS = 30_000
-MAX_RECENT = 10
-RESOURCES = Path(__file__).resolve().parent.parent / "resources"
 OPEN_FILTER = ("Recordings and sessions (*.mp4 *.avi *.mkv *.mov *.webm *.m4v *.bag *.db3 *.mcap "
                "*.panotopo.json *.json *.npz);;Videos (*.mp4 *.avi *.mkv *.mov *.webm *.m4v);;"
                "ROS bags (*.bag *.db3 *.mcap);;Sessions (*.json);;Descriptors (*.npz);;All files (*)")
@@ -52,6 +49,7 @@ class MainWindow(QMainWindow):
                  describe_options: Optional[dict] = None, interactive: bool = True) -> None:
         super().__init__()
         self.settings = settings if settings is not None else QSettings(APP_NAME, APP_NAME)
+        self.defaults = _default_settings()
         self.cache_root = cache_root
         self.describe_options = dict(describe_options or {})
         self.interactive = interactive
@@ -59,7 +57,7 @@ class MainWindow(QMainWindow):
         self.frames = FrameCache()
         self.undo_stack = QUndoStack(self)
         self.runner = RunController(self)
-        self.advance_after_decision = True
+        self.advance_after_decision = bool(self.defaults["ui"].get("advance_after_decision", True))
         self._pending_decisions: Optional[dict] = None
         self._pending_view: dict = {}
         self._extra_dirty = False     # changes outside the undo stack (poses loaded)
@@ -75,15 +73,13 @@ class MainWindow(QMainWindow):
         self._update_actions()
 
         self.autosave_timer = QTimer(self)
-        self.autosave_timer.setInterval(AUTOSAVE_MS)
+        self.autosave_timer.setInterval(int(1000 * self.defaults["ui"].get("autosave_seconds", 30)))
         self.autosave_timer.timeout.connect(self.autosave)
         self.autosave_timer.start()
         self.setAcceptDrops(True)
-        for name in ("icon.png", "panotopo.png", "icon.svg", "panotopo.svg"):
-            if (RESOURCES / name).is_file():
-                self.setWindowIcon(QIcon(str(RESOURCES / name)))
-                break
-        self.resize(1500, 950)
+        self.setWindowIcon(_app_icon())
+        ui = self.defaults["ui"]
+        self.resize(int(ui.get("window_width", 1500)), int(ui.get("window_height", 950)))
         geometry = self.settings.value("window/geometry")
         if geometry is not None and interactive:
             self.restoreGeometry(geometry)
@@ -96,12 +92,13 @@ class MainWindow(QMainWindow):
         self.loop_table = LoopTable(self.doc)
         self.pair_view = PairView(self.doc, self.frames)
         self.params_panel = ParamsPanel()
+        self._apply_default_settings()
         self.eval_panel = EvalPanel(self.doc)
 
         self.tabs = QTabWidget()
         self.tabs.addTab(self.graph_view, "Graph")
         self.tabs.addTab(self.similarity_view, "Similarity matrix")
-        bottom = QSplitter(Qt.Horizontal)
+        self.bottom_splitter = bottom = QSplitter(Qt.Horizontal)
         bottom.addWidget(self.loop_table)
         bottom.addWidget(self.pair_view)
         bottom.setSizes([480, 520])
@@ -180,7 +177,8 @@ class MainWindow(QMainWindow):
         self.manual_action = A("&Add manual loop…", self.manual_loop_dialog, "M",
                                "Join two nodes that are the same place")
         self.remove_action = A("Re&move manual loop", self.remove_selected_manual, "Delete")
-        self.advance_action = QAction("Advance after a decision", self, checkable=True, checked=True)
+        self.advance_action = QAction("Advance after a decision", self, checkable=True,
+                                      checked=self.advance_after_decision)
         self.advance_action.toggled.connect(lambda on: setattr(self, "advance_after_decision", on))
 
         self.run_action = A("&Run", self.start_run, "F5", "Describe the recording and build the map")
@@ -277,6 +275,22 @@ class MainWindow(QMainWindow):
         self.doc.mapReplaced.connect(self._update_actions)
         self.doc.loopsChanged.connect(self._update_actions)
 
+    def _apply_default_settings(self) -> None:
+        """Start from resources/default_settings.json (map parameters, descriptor, interval, distance)."""
+        known = set(MapParams.__dataclass_fields__)
+        try:
+            params = MapParams(**{k: v for k, v in self.defaults["map"].items() if k in known})
+        except TypeError:
+            params = MapParams()
+        if params.method not in __import__("engine.params", fromlist=["METHODS"]).METHODS:
+            params = MapParams()
+        self.doc.params = params
+        self.params_panel.set_params(params, {})
+        describe = self.defaults["describe"]
+        self.params_panel.set_describe(str(describe.get("descriptor", self.params_panel.descriptor_name())),
+                                       float(describe.get("interval", 1.0)))
+        self.doc.dist_th = float(self.defaults["eval"].get("dist_th", 1.0))
+
     # ==== opening =====================================================================
     def open_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Open", self._last_dir(), OPEN_FILTER)
@@ -348,7 +362,7 @@ class MainWindow(QMainWindow):
         self.doc.set_poses(None, None)
         self.doc.session_path = None
         self.doc.describe_settings = settings
-        self.doc.params = session.map_params() if session else MapParams(method=self.params_panel.params().method)
+        self.doc.params = session.map_params() if session else self.params_panel.params()
         self._pending_decisions = dict(session.decisions) if session else None
         self._pending_view = dict(session.view) if session else {}
         self.doc.set_source(p, source)
@@ -921,7 +935,7 @@ class MainWindow(QMainWindow):
     def _add_recent(self, path: str) -> None:
         path = str(Path(path).resolve())
         recent = [path] + [r for r in self.recent_files() if r != path]
-        self.settings.setValue("recent", recent[:MAX_RECENT])
+        self.settings.setValue("recent", recent[:int(self.defaults["ui"].get("max_recent_files", 10))])
         self.settings.setValue("last_dir", str(Path(path).parent))
         self._rebuild_recent_menu()
 
@@ -945,6 +959,20 @@ class MainWindow(QMainWindow):
         QMessageBox.about(self, "About panotopo",
                           f"<b>panotopo {__version__}</b><br>Topological maps from 360-degree recordings: "
                           "panorama shift, visual place recognition, curated loop closures, GraphML out.")
+
+    def showEvent(self, event) -> None:
+        super().showEvent(event)
+        if not getattr(self, "_split_done", False):  # after the first layout: real widths are known
+            self._split_done = True
+            QTimer.singleShot(0, self._initial_split)
+
+    def _initial_split(self) -> None:
+        total = self.main_splitter.width()
+        if total > 400:
+            left = int(0.31 * total)
+            self.main_splitter.setSizes([left, total - left])
+            right = total - left
+            self.bottom_splitter.setSizes([int(0.55 * right), right - int(0.55 * right)])
 
     # ==== drag and drop, closing ============================================================
     def dragEnterEvent(self, event: QDragEnterEvent) -> None:
@@ -972,6 +1000,31 @@ class MainWindow(QMainWindow):
         self.frame_viewer.stop_play()
         self.runner.stop()
         self.doc.close()
+
+
+def _default_settings() -> dict:
+    """resources/default_settings.json, or built-in values if it is missing or broken."""
+    fallback = {"map": {}, "describe": {}, "eval": {}, "ui": {}}
+    try:
+        import resources
+
+        data = resources.default_settings()
+    except Exception:  # the window must open even with a damaged install
+        return fallback
+    return {k: dict(data.get(k) or {}) for k in fallback}
+
+
+def _app_icon() -> QIcon:
+    icon = QIcon()
+    try:
+        import resources
+
+        for path in resources.icon_paths():
+            if path.is_file():
+                icon.addFile(str(path))
+    except Exception:
+        pass
+    return icon
 
 
 def _describe_settings(data: dict, default_options: dict):

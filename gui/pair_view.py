@@ -49,16 +49,16 @@ class PairView(QWidget):
         self.cand_view.addItem(self.cand_image)
         self.cand_view.setXLink(self.query_view)  # zoom and pan together
 
-        self.confirm_button = QPushButton("✓ Confirm (C)")
+        self.confirm_button = QPushButton("✓ Confirm")
         self.confirm_button.setToolTip("This is the same place: keep the loop (C or Y)")
-        self.reject_button = QPushButton("✗ Reject (R)")
+        self.reject_button = QPushButton("✗ Reject")
         self.reject_button.setToolTip("Not the same place: drop the loop from the export (R or N)")
-        self.reset_button = QPushButton("↺ Reset (U)")
+        self.reset_button = QPushButton("↺ Reset")
         self.reset_button.setToolTip("Back to undecided (Backspace or U)")
-        self.add_button = QPushButton("＋ Add as manual loop")
-        self.add_button.setToolTip("These two nodes are the same place: add a loop by hand")
-        self.remove_button = QPushButton("Remove manual loop")
-        self.remove_button.setToolTip("Delete this hand-made loop")
+        self.add_button = QPushButton("+ Manual")
+        self.add_button.setToolTip("These two nodes are the same place: add a loop by hand (M opens a dialog for any two nodes)")
+        self.remove_button = QPushButton("− Remove")
+        self.remove_button.setToolTip("Delete this hand-made loop (Delete)")
         self.confirm_button.clicked.connect(lambda: self.decide.emit("confirmed"))
         self.reject_button.clicked.connect(lambda: self.decide.emit("rejected"))
         self.reset_button.clicked.connect(lambda: self.decide.emit("auto"))
@@ -67,6 +67,8 @@ class PairView(QWidget):
         buttons = QHBoxLayout()
         buttons.setContentsMargins(0, 0, 0, 0)
         for b in (self.confirm_button, self.reject_button, self.reset_button, self.add_button, self.remove_button):
+            b.setMinimumWidth(0)
+            b.setStyleSheet("padding: 3px 6px")
             buttons.addWidget(b)
         buttons.addStretch(1)
 
@@ -108,6 +110,7 @@ class PairView(QWidget):
 
             self.yaw, self.yaw_score = relative_yaw(a.rgb, b.rgb)
             yaw_source = f"estimated, score {self.yaw_score:.2f}"
+            self.doc.note_estimated_yaw(key, self.yaw)
         self._show_images(a, b)
 
         sim = self.doc.pair_similarity(int(du["index"]), int(dv["index"]))
@@ -118,7 +121,7 @@ class PairView(QWidget):
         self.title.setText(f"<b>{u}</b> (frame {key[0]}) ↔ <b>{v}</b> (frame {key[1]}) &nbsp;·&nbsp; "
                            f"similarity {sim:.3f} &nbsp;·&nbsp; {yaw_text} &nbsp;·&nbsp; {state}")
         self.query_title.setText(_caption("Query", u, du))
-        aligned = " — rolled to align with the query" if self.yaw is not None else ""
+        aligned = " (aligned)" if self.yaw is not None else ""
         self.cand_title.setText(_caption("Candidate", v, dv) + aligned)
         self._update_buttons()
 
@@ -157,4 +160,4 @@ class PairView(QWidget):
 
 def _caption(role: str, node: str, data: dict) -> str:
     label = f" “{data['label']}”" if data.get("label") else ""
-    return f"{role}: {node}{label}, frame {data['frame']}, t = {float(data['stamp']):.2f} s"
+    return f"{role}: {node}{label}, frame {data['frame']}, t = {float(data['stamp']):.1f} s"

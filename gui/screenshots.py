@@ -1,0 +1,109 @@
+"""Pictures of every view for the docs, from a real run on a synthetic recording.
+
+``python -m gui.screenshots docs/screenshots`` renders the demo route (512x256),
+runs the engine in the real window, curates a few loops and saves:
+main_window.png, frame_viewer.png, graph_view.png, similarity_matrix.png,
+pair_view.png, loop_table.png, parameters_and_evaluation.png.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+
+def make_screenshots(out_dir: str, route: str = "demo", method: str = "ours",
+                     work_dir: str | None = None) -> list[Path]:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from PySide6.QtCore import QEventLoop, QSettings
+    from PySide6.QtWidgets import QApplication
+
+    from engine.synth import make_recording, write_recording
+
+    from .main_window import MainWindow
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    work = Path(work_dir or tempfile.mkdtemp(prefix="panotopo-shots-"))
+    rec = make_recording(route=route, look="indoor", width=512, height=256)
+    paths = write_recording(rec, work, formats=("video", "poses"))
+
+    app = QApplication.instance() or QApplication(["panotopo"])
+    settings = QSettings(str(work / "settings.ini"), QSettings.IniFormat)
+    w = MainWindow(settings=settings, interactive=False)
+    w.resize(1600, 1000)
+    # "ours" (the paper's method) gives more candidates to curate than the stricter default.
+    w.params_panel.method.setCurrentIndex(w.params_panel.method.findData(method))
+    w.show()
+    app.processEvents()
+    loop = QEventLoop()
+    w.mapReady.connect(loop.quit)
+    w.runFailed.connect(lambda m: (print(m, file=sys.stderr), loop.quit()))
+    if not w.open_path(str(paths["video"])):
+        raise SystemExit(f"cannot open {paths['video']}")
+    loop.exec()
+    if not w.doc.has_map:
+        raise SystemExit("the run failed")
+
+    # Curate a little so every status shows: confirm the first true loop, reject a
+    # false one (by ground truth), add a missed loop by hand, name two places.
+    ev = w.doc.evaluation
+    truth = ev.loop_truth if ev is not None else {}
+    rows = w.doc.loop_rows()
+    w.advance_after_decision = False
+    true_rows = [r for r in rows if truth.get((r.u, r.v)) == "TP"]
+    false_rows = [r for r in rows if truth.get((r.u, r.v)) == "FP"]
+    if true_rows:
+        w.loop_table.select_key(true_rows[0].key)
+        w.decide("confirmed")
+    if false_rows:
+        w.loop_table.select_key(false_rows[0].key)
+        w.decide("rejected")
+    if ev is not None and ev.fn_pairs:
+        i, j = ev.fn_pairs[len(ev.fn_pairs) // 2]
+        w.add_manual_loop(w._key_of_nodes(i, j))
+    frames = w.doc.node_frames()
+    if frames.size > 10:
+        w.set_label(int(frames[0]), "start")
+        w.set_label(int(frames[frames.size // 2]), "corridor B")
+    pending = [r for r in w.doc.loop_rows() if r.status == "auto"]
+    if pending or rows:
+        w.loop_table.select_key((pending or rows)[0].key)
+    w.frame_viewer.show_frame(w.frame_viewer.current_frame)
+
+    def settle() -> None:
+        for _ in range(10):
+            app.processEvents()
+
+    settle()
+    saved = []
+
+    def save(widget, name: str) -> None:
+        path = out / name
+        widget.grab().save(str(path))
+        saved.append(path)
+
+    save(w, "main_window.png")
+    save(w.frame_viewer, "frame_viewer.png")
+    save(w.graph_view, "graph_view.png")
+    save(w.pair_view, "pair_view.png")
+    save(w.loop_table, "loop_table.png")
+    w.tabs.setCurrentWidget(w.similarity_view)
+    settle()
+    save(w.similarity_view, "similarity_matrix.png")
+    w.tabs.setCurrentWidget(w.graph_view)
+    left = w.params_dock.widget().parentWidget()
+    save(w.params_panel, "parameters.png")
+    save(w.eval_panel, "evaluation.png")
+    w.undo_stack.setClean()
+    w._extra_dirty = False
+    w.close()
+    del left
+    return saved
+
+
+if __name__ == "__main__":
+    for p in make_screenshots(sys.argv[1] if len(sys.argv) > 1 else "docs/screenshots"):
+        print(p)
