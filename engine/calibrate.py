@@ -88,11 +88,12 @@ def zscores(sims: np.ndarray, exclude: int, max_lag: int | None = None) -> np.nd
     max_lag = 4 * exclude + 8 if max_lag is None else int(max_lag)
     if m > 1 and max_lag > 0:
         lag_mu, lag_sd = lag_background(sims, max_lag)
-        idx = np.arange(m)
-        lag = np.abs(idx[:, None] - idx[None, :])
-        close = (lag >= 1) & (lag <= max_lag)
-        li = lag[close]
-        z[close] = np.minimum(z[close], (sims[close] - lag_mu[li]) / lag_sd[li])
+        rows = np.arange(m)
+        for lag in range(1, min(max_lag, m - 1) + 1):   # one diagonal at a time: O(m * max_lag)
+            i, j = rows[:m - lag], rows[lag:]
+            zl = (sims[i, j] - lag_mu[lag]) / lag_sd[lag]
+            z[i, j] = np.minimum(z[i, j], zl)
+            z[j, i] = np.minimum(z[j, i], zl)
     return z
 
 

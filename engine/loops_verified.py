@@ -30,16 +30,15 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from scipy.ndimage import maximum_filter
 
 from .calibrate import robust_stats, zscores
 from .params import MapParams
-from .verify import align, pair_yaw
+from .verify import align_nodes, pair_yaw
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
 NMS_RADIUS = 2          # nodes
 # Loose gates for which pairs are verified at all (z units); the real thresholds follow.
-_CANDIDATE_Z = 2.0
+_CANDIDATE_Z = 2.5
 _MAX_CANDIDATES = 20000
 _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
 
@@ -69,54 +68,74 @@ class PairScores:
     m: int
 
 
-def _diagonal_mean(z: np.ndarray, half: int, reverse: bool) -> np.ndarray:
-    """Mean of z over (i + k, j + k) (or (i + k, j - k)) for |k| <= half, NaNs skipped."""
+def _mask_near(z: np.ndarray, exclude: int) -> None:
+    """Set z to NaN for temporal neighbours |i - j| <= exclude (in place, per diagonal)."""
     m = z.shape[0]
-    pad = np.full((m + 2 * half, m + 2 * half), np.nan, np.float32)
-    pad[half:half + m, half:half + m] = z
-    acc = np.zeros((m, m), np.float32)
-    cnt = np.zeros((m, m), np.int16)
-    for k in range(-half, half + 1):
-        kj = -k if reverse else k
-        part = pad[half + k:half + k + m, half + kj:half + kj + m]
-        ok = ~np.isnan(part)
-        acc += np.where(ok, part, 0.0)
-        cnt += ok
-    out = np.full((m, m), -np.inf, np.float32)
-    enough = cnt >= half + 1
-    out[enough] = acc[enough] / cnt[enough]
-    return out
+    rows = np.arange(m)
+    for lag in range(0, min(exclude, m - 1) + 1):
+        z[rows[:m - lag], rows[lag:]] = np.nan
+        z[rows[lag:], rows[:m - lag]] = np.nan
+
+
+def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int) -> np.ndarray:
+    """Mean z over (a + k, b + k) or (a + k, b - k), |k| <= half, the better direction.
+
+    NaNs (temporal neighbours, outside the matrix) are skipped; fewer than half + 1
+    valid terms give -inf.
+    """
+    m = z.shape[0]
+    k = np.arange(-half, half + 1)
+    best = np.full(a.size, -np.inf, np.float32)
+    for sign in (1, -1):
+        ii = a[:, None] + k[None, :]
+        jj = b[:, None] + sign * k[None, :]
+        inside = (ii >= 0) & (ii < m) & (jj >= 0) & (jj < m)
+        vals = np.where(inside, z[np.clip(ii, 0, m - 1), np.clip(jj, 0, m - 1)], np.nan)
+        ok = ~np.isnan(vals)
+        cnt = ok.sum(axis=1)
+        mean = np.where(cnt >= half + 1, np.where(ok, vals, 0.0).sum(axis=1) / np.maximum(cnt, 1), -np.inf)
+        best = np.maximum(best, mean.astype(np.float32))
+    return best
 
 
 def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], exclude: int,
                 candidate_z: float = _CANDIDATE_Z) -> PairScores:
-    """Calibrated, sequence and verification scores of all plausible pairs."""
+    """Calibrated, sequence and verification scores of all plausible pairs.
+
+    Cheap for thousands of nodes: the sequence score needs at least one pair of its
+    diagonal run to stand out, so only the neighbourhoods (along both diagonals) of
+    pairs with z >= candidate_z are scored, never the whole matrix.
+    """
     v = np.asarray(node_vectors, dtype=np.float32)
     m = v.shape[0]
     sims = v @ v.T
     z = zscores(sims, exclude)
-    idx = np.arange(m)
-    near = np.abs(idx[:, None] - idx[None, :]) <= exclude
-    z[near] = np.nan
-    seq = np.maximum(_diagonal_mean(z, SEQ_HALF, False), _diagonal_mean(z, SEQ_HALF, True))
-    zz = np.where(np.isnan(z), -np.inf, z)
-    strength = np.maximum(zz, seq)
-    upper = idx[None, :] > idx[:, None] + max(exclude, 1)
-    a, b = np.nonzero(upper & (strength >= candidate_z))
+    _mask_near(z, exclude)
+    gap = max(exclude, 1)
+    sa, sb = np.nonzero(np.triu(z >= candidate_z, gap + 1))
+    k = np.arange(-SEQ_HALF, SEQ_HALF + 1)
+    ca = np.concatenate([(sa[:, None] + k).ravel(), (sa[:, None] + k).ravel()])
+    cb = np.concatenate([(sb[:, None] + k).ravel(), (sb[:, None] - k).ravel()])
+    ok = (ca >= 0) & (cb < m) & (cb > ca + gap)
+    key = np.unique(ca[ok].astype(np.int64) * m + cb[ok])
+    a, b = key // m, key % m
+    zz = np.nan_to_num(z[a, b], nan=-np.inf)
+    seq = _sequence_scores(z, a, b, SEQ_HALF)
+    keep = np.maximum(zz, seq) >= candidate_z
+    a, b, zz, seq = a[keep], b[keep], zz[keep], seq[keep]
     if a.size > _MAX_CANDIDATES:
-        keep = np.argsort(-strength[a, b], kind="stable")[:_MAX_CANDIDATES]
-        keep.sort()
-        a, b = a[keep], b[keep]
+        top = np.sort(np.argsort(-np.maximum(zz, seq), kind="stable")[:_MAX_CANDIDATES])
+        a, b, zz, seq = a[top], b[top], zz[top], seq[top]
     verify = shift = None
-    if node_columns is not None and a.size:
+    if node_columns is not None:
         cols = np.asarray(node_columns)
-        score, shift, _ = align(cols[a], cols[b])
-        mu, sd = _verify_background(cols, exclude)
-        verify = (score - mu) / sd
-    elif node_columns is not None:
-        verify = np.zeros(0, np.float32)
-        shift = np.zeros(0, np.int64)
-    return PairScores(a.astype(np.int64), b.astype(np.int64), zz[a, b], seq[a, b], verify, shift,
+        verify = np.zeros(a.size, np.float32)
+        shift = np.zeros(a.size, np.int64)
+        if a.size:
+            score, shift = align_nodes(cols, a, b)
+            mu, sd = _verify_background(cols, exclude)
+            verify = ((score - mu) / sd).astype(np.float32)
+    return PairScores(a.astype(np.int64), b.astype(np.int64), zz.astype(np.float32), seq, verify, shift,
                       sims[a, b], m)
 
 
@@ -130,7 +149,7 @@ def _verify_background(cols: np.ndarray, exclude: int, seed: int = 0) -> tuple[f
     a, b = a[ok][:_VERIFY_SAMPLE], b[ok][:_VERIFY_SAMPLE]
     if a.size < 10:
         return 0.0, 1.0
-    score, _, _ = align(cols[a], cols[b])
+    score, _ = align_nodes(cols, a, b)
     mu, sd = robust_stats(score.astype(np.float64))
     return float(mu), float(sd)
 
@@ -152,11 +171,22 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
     strength = np.maximum(ps.z[ok], ps.seq[ok])
     if ps.verify is not None:
         strength = strength + ps.verify[ok]
-    grid = np.full((ps.m, ps.m), -np.inf, np.float32)
-    grid[ps.a[ok], ps.b[ok]] = strength
-    peak = maximum_filter(grid, size=2 * NMS_RADIUS + 1, mode="constant", cval=-np.inf)
-    keep = grid[ps.a[ok], ps.b[ok]] >= peak[ps.a[ok], ps.b[ok]]
+    keep = _local_maxima(ps.a[ok], ps.b[ok], strength, NMS_RADIUS)
     return ok[keep]
+
+
+def _local_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, radius: int) -> np.ndarray:
+    """Mask of pairs that are the strongest within ``radius`` nodes on both sides (ties keep all)."""
+    keep = np.ones(a.size, bool)
+    order = np.argsort(a, kind="stable")
+    a_s = a[order]
+    for pos, idx in enumerate(order):   # accepted pairs are few; each looks at a narrow band
+        lo = np.searchsorted(a_s, a[idx] - radius, "left")
+        hi = np.searchsorted(a_s, a[idx] + radius, "right")
+        band = order[lo:hi]
+        near = band[np.abs(b[band] - b[idx]) <= radius]
+        keep[idx] = strength[idx] >= strength[near].max()
+    return keep
 
 
 def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Optional[np.ndarray] = None,

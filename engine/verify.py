@@ -77,6 +77,35 @@ def align(columns_a: np.ndarray, columns_b: np.ndarray) -> tuple[np.ndarray, np.
     return score, shift, margin
 
 
+def align_nodes(columns: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``align`` for pairs (a[k], b[k]) of rows of ``columns`` (n, W, F): (score, shift).
+
+    Each node's spectrum is computed once, however many pairs it is in, so thousands
+    of candidate pairs cost one small product and inverse FFT each.
+    """
+    a = np.asarray(a, np.int64)
+    b = np.asarray(b, np.int64)
+    if a.size == 0:
+        return np.zeros(0, np.float32), np.zeros(0, np.int64)
+    nodes, inv = np.unique(np.concatenate([a, b]), return_inverse=True)
+    spec, active = _spectra(np.asarray(columns)[nodes])
+    spec = spec.astype(np.complex64)
+    ia, ib = inv[:a.size], inv[a.size:]
+    w = np.asarray(columns).shape[1]
+    score = np.empty(a.size, np.float32)
+    shift = np.empty(a.size, np.int64)
+    for s0 in range(0, a.size, 4 * _BATCH):
+        s1 = min(a.size, s0 + 4 * _BATCH)
+        pa, pb = ia[s0:s1], ib[s0:s1]
+        n_active = np.maximum((active[pa] & active[pb]).sum(axis=1), 1)
+        cross = np.einsum("kfw,kfw->kw", np.conj(spec[pa]), spec[pb])
+        corr = np.fft.irfft(cross, n=w, axis=1) / n_active[:, None]
+        best = np.argmax(corr, axis=1)
+        score[s0:s1] = corr[np.arange(s1 - s0), best]
+        shift[s0:s1] = best
+    return score, shift
+
+
 def pair_yaw(shift_cols: np.ndarray, column_width: int, frame_shift_a: np.ndarray,
              frame_shift_b: np.ndarray, frame_width: int) -> np.ndarray:
     """Relative yaw (degrees, (-180, 180]) of the original frames of each pair.
