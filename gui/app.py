@@ -51,7 +51,8 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
     try:
         if input_path:
             if not window.open_path(input_path):
-                print(f"panotopo: {window._last_error or 'cannot open ' + input_path}", file=sys.stderr)
+                if not window._last_error:  # otherwise the window has printed the reason already
+                    print(f"panotopo: cannot open {input_path}", file=sys.stderr)
                 return 2
             if window.runner.running:
                 loop = QEventLoop()
@@ -60,8 +61,9 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
                 window.runFailed.connect(lambda m: (outcome.setdefault("error", m), loop.quit()))
                 window.runCancelled.connect(lambda: (outcome.setdefault("error", "run cancelled"), loop.quit()))
                 loop.exec()
-                if "error" in outcome:
-                    print(f"panotopo: {outcome['error']}", file=sys.stderr)
+                if "error" in outcome:  # the window printed the reason (non-interactive)
+                    if outcome["error"] == "run cancelled":
+                        print("panotopo: run cancelled", file=sys.stderr)
                     return 2
             window.select_first_loop()
         for _ in range(5):  # let layouts and pyqtgraph settle before the picture

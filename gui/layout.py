@@ -32,8 +32,8 @@ def path_layout(topomap, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
         xy = _force_layout(n, np.concatenate([path, loops]), seed)
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     scale = float(np.median(steps)) if steps.size and np.median(steps) > 0 else 1.0
-    xy = (xy - xy.mean(axis=0)) / scale
-    return xy[:, 0], xy[:, 1]
+    xy = ((xy - xy.mean(axis=0)) / scale).astype(np.float64)
+    return xy[:, 0].copy(), xy[:, 1].copy()
 
 
 def _force_layout(n: int, edges: np.ndarray, seed: int) -> np.ndarray:

@@ -29,6 +29,7 @@ from .frame_viewer import FrameViewer
 from .graph_view import GraphView
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
+from .node_panel import NodePanel
 from .pair_view import PairView
 from .params_panel import ParamsPanel
 from .similarity_view import SimilarityView
@@ -91,6 +92,7 @@ class MainWindow(QMainWindow):
         self.similarity_view = SimilarityView(self.doc)
         self.loop_table = LoopTable(self.doc)
         self.pair_view = PairView(self.doc, self.frames)
+        self.node_panel = NodePanel(self.doc)
         self.params_panel = ParamsPanel()
         self._apply_default_settings()
         self.eval_panel = EvalPanel(self.doc)
@@ -106,8 +108,13 @@ class MainWindow(QMainWindow):
         right.addWidget(self.tabs)
         right.addWidget(bottom)
         right.setSizes([520, 430])
+        self.left_splitter = QSplitter(Qt.Vertical)
+        self.left_splitter.addWidget(self.frame_viewer)
+        self.left_splitter.addWidget(self.node_panel)
+        self.left_splitter.setStretchFactor(0, 3)
+        self.left_splitter.setStretchFactor(1, 2)
         self.main_splitter = QSplitter(Qt.Horizontal)
-        self.main_splitter.addWidget(self.frame_viewer)
+        self.main_splitter.addWidget(self.left_splitter)
         self.main_splitter.addWidget(right)
         self.main_splitter.setSizes([560, 940])
         self.main_splitter.setChildrenCollapsible(False)
@@ -259,8 +266,11 @@ class MainWindow(QMainWindow):
         self.frame_viewer.frameChanged.connect(self._frame_changed)
         self.graph_view.nodeClicked.connect(self.show_node)
         self.graph_view.loopClicked.connect(self.select_loop)
-        self.graph_view.manualLoopRequested.connect(lambda a, b: self.manual_loop_dialog(a, b))
+        self.graph_view.manualLoopRequested.connect(self._ctrl_click_loop)
         self.similarity_view.pairClicked.connect(self.select_pair)
+        self.node_panel.labelEdited.connect(self.set_label)
+        self.node_panel.loopActivated.connect(self.select_loop)
+        self.node_panel.addLoopRequested.connect(lambda k: self.manual_loop_dialog(k))
         self.loop_table.loopSelected.connect(self._loop_selected)
         self.loop_table.view.decide.connect(self.decide)
         self.pair_view.decide.connect(self.decide)
@@ -270,6 +280,7 @@ class MainWindow(QMainWindow):
         self.params_panel.runRequested.connect(self.start_run)
         self.params_panel.describeEdited.connect(
             lambda: self.statusBar().showMessage("Descriptor settings changed: press Run (F5) to describe again", 8000))
+        self.doc.mapReplaced.connect(self._sync_current_node)
         self.doc.mapReplaced.connect(self._update_summary)
         self.doc.loopsChanged.connect(self._update_summary)
         self.doc.mapReplaced.connect(self._update_actions)
@@ -665,6 +676,14 @@ class MainWindow(QMainWindow):
         self.loop_table.select_key(tuple(key))
         return True
 
+    def _ctrl_click_loop(self, a: int, b: int) -> None:
+        """Ctrl+click in the graph: a manual loop from the current node (undoable, no dialog)."""
+        if abs(a - b) < 2:
+            self.statusBar().showMessage("Neighbouring nodes are already joined by the path", 5000)
+            return
+        if self.add_manual_loop(self._key_of_nodes(a, b)):
+            self.statusBar().showMessage(f"Manual loop n{min(a, b)} ↔ n{max(a, b)} added (Ctrl+Z to undo)", 5000)
+
     def remove_manual_loop(self, key: LoopKey) -> None:
         attrs = self.doc.loop_attrs(key)
         if attrs is None or attrs.get("status") != "manual":
@@ -739,8 +758,14 @@ class MainWindow(QMainWindow):
     def show_node(self, k: int) -> None:
         self.frame_viewer.show_frame(int(self.doc.node_data(self.doc.node_id(k))["frame"]))
 
+    def _sync_current_node(self) -> None:
+        self._frame_changed(self.frame_viewer.current_frame)
+
     def _frame_changed(self, frame: int) -> None:
-        self.graph_view.set_current_node(self.doc.node_at_or_before(frame) if self.doc.has_map else None)
+        k = self.doc.node_at_or_before(frame) if self.doc.has_map else None
+        self.graph_view.set_current_node(k)
+        if k != self.node_panel.node_index:
+            self.node_panel.show_node(k)
 
     def select_first_loop(self) -> bool:
         rows = self.loop_table.proxy.rowCount()
@@ -973,6 +998,10 @@ class MainWindow(QMainWindow):
             self.main_splitter.setSizes([left, total - left])
             right = total - left
             self.bottom_splitter.setSizes([int(0.55 * right), right - int(0.55 * right)])
+        height = self.left_splitter.height()
+        if height > 300:  # the viewer as tall as its two panoramas, the node panel below
+            viewer = min(int(left - 8 + 130), height - 160)
+            self.left_splitter.setSizes([viewer, height - viewer])
 
     # ==== drag and drop, closing ============================================================
     def dragEnterEvent(self, event: QDragEnterEvent) -> None:

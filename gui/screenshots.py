@@ -3,7 +3,8 @@
 ``python -m gui.screenshots docs/screenshots`` renders the demo route (512x256),
 runs the engine in the real window, curates a few loops and saves:
 main_window.png, frame_viewer.png, graph_view.png, similarity_matrix.png,
-pair_view.png, loop_table.png, parameters_and_evaluation.png.
+pair_view.png, loop_table.png, parameters.png, evaluation.png and
+graph_view_layout.png (the graph without ground truth).
 """
 
 from __future__ import annotations
@@ -94,13 +95,14 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "ours",
     settle()
     save(w.similarity_view, "similarity_matrix.png")
     w.tabs.setCurrentWidget(w.graph_view)
-    left = w.params_dock.widget().parentWidget()
     save(w.params_panel, "parameters.png")
     save(w.eval_panel, "evaluation.png")
+    w.doc.set_poses(None, None)  # the graph as it looks without ground truth
+    settle()
+    save(w.graph_view, "graph_view_layout.png")
     w.undo_stack.setClean()
     w._extra_dirty = False
     w.close()
-    del left
     return saved
 
 

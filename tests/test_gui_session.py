@@ -414,3 +414,65 @@ def test_recent_files_and_frame_keys(qtbot, make_window, recording, tmp_path):
     assert "frame" in w.frame_viewer.info.text()
     frame = w.frames.get(9)
     assert frame is not None and 0 <= frame.shift < frame.rgb.shape[1]
+
+
+def test_graph_loop_click_and_ctrl_click_manual_loop(qtbot, make_window, recording):
+    w = make_window()
+    open_and_run(qtbot, w, recording["video"])
+    qtbot.wait(50)
+    w.doc.set_poses(None, None)  # on the path layout loop arcs have a length (with poses they are ~0 m)
+    qtbot.wait(50)
+    gv = w.graph_view
+    # Click the middle of a loop arc drawn on the layout: it is selected in the table.
+    # Zoom on one loop arc (the layout pulls loop nodes together), then click its middle.
+    row = max(w.doc.loop_rows(), key=lambda r: np.hypot(gv.x[r.index_u] - gv.x[r.index_v],
+                                                        gv.y[r.index_u] - gv.y[r.index_v]))
+    a, b = row.index_u, row.index_v
+    mid = ((gv.x[a] + gv.x[b]) / 2, (gv.y[a] + gv.y[b]) / 2)
+    half = 0.8 * max(abs(gv.x[a] - gv.x[b]), abs(gv.y[a] - gv.y[b]))
+    gv.plot.getPlotItem().getViewBox().setRange(xRange=(mid[0] - half, mid[0] + half),
+                                                yRange=(mid[1] - half, mid[1] + half), padding=0)
+    qtbot.wait(50)
+    assert gv.nearest_node(*mid)[1] > 12
+    vb = gv.plot.getPlotItem().getViewBox()
+    import pyqtgraph as pg
+
+    pos = gv.plot.mapFromScene(vb.mapViewToScene(pg.Point(*mid)))
+    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, pos=pos)
+    assert w.loop_table.selected_key() == row.key
+
+    # Select a node (plain click), then Ctrl+click another: a manual loop, undoable.
+    gv.plot.autoRange()
+    qtbot.wait(50)
+    n = w.doc.node_count()
+    first, second = 1, n - 2
+    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, pos=gv.node_screen_pos(first))
+    assert gv.current_node == first
+    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, Qt.ControlModifier, pos=gv.node_screen_pos(second))
+    key = w._key_of_nodes(first, second)
+    assert statuses(w)[key] == "manual"
+    w.undo_stack.undo()
+    assert key not in statuses(w)
+
+
+def test_drop_a_file_opens_it(qtbot, make_window, recording):
+    from PySide6.QtCore import QMimeData, QPointF, QUrl
+    from PySide6.QtGui import QDropEvent
+
+    w = make_window()
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(recording["video"]))])
+    event = QDropEvent(QPointF(100, 100), Qt.CopyAction, mime, Qt.LeftButton, Qt.NoModifier)
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        w.dropEvent(event)
+    assert w.doc.input_path == Path(recording["video"])
+
+
+def test_shortcuts_dialog_lists_the_curation_keys(qtbot):
+    from gui.shortcuts_dialog import ShortcutsDialog
+
+    d = ShortcutsDialog()
+    qtbot.addWidget(d)
+    table = d.layout().itemAt(0).widget()
+    keys = {table.item(r, 1).text() for r in range(table.rowCount())}
+    assert {"C or Y", "R or N", "Ctrl+Z"} <= keys
