@@ -37,6 +37,8 @@ from .verify import align_nodes, pair_yaw
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
 NMS_RADIUS = 2          # nodes
+# Forward sequence support only between nodes more than this many exclusion widths apart.
+FORWARD_LAG_FACTOR = 4
 # Loose gates for which pairs are verified at all (z units); the real thresholds follow.
 _CANDIDATE_Z = 2.5
 _MAX_CANDIDATES = 20000
@@ -66,6 +68,7 @@ class PairScores:
     shift: Optional[np.ndarray]   # best column shift of the aligned signatures
     cosine: np.ndarray
     m: int
+    forward_min_lag: int = 0
 
 
 def _mask_near(z: np.ndarray, exclude: int) -> None:
@@ -77,11 +80,14 @@ def _mask_near(z: np.ndarray, exclude: int) -> None:
         z[rows[lag:], rows[:m - lag]] = np.nan
 
 
-def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int) -> np.ndarray:
+def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int,
+                     forward_min_lag: int = 0) -> np.ndarray:
     """Mean z over (a + k, b + k) or (a + k, b - k), |k| <= half, the better direction.
 
     NaNs (temporal neighbours, outside the matrix) are skipped; fewer than half + 1
-    valid terms give -inf.
+    valid terms give -inf. The forward direction counts only for pairs more than
+    ``forward_min_lag`` apart: a forward run of pairs a few nodes apart is one stretch
+    that looks alike along its length (a long uniform street), not a second visit.
     """
     m = z.shape[0]
     k = np.arange(-half, half + 1)
@@ -94,6 +100,8 @@ def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int) -> 
         ok = ~np.isnan(vals)
         cnt = ok.sum(axis=1)
         mean = np.where(cnt >= half + 1, np.where(ok, vals, 0.0).sum(axis=1) / np.maximum(cnt, 1), -np.inf)
+        if sign == 1:
+            mean = np.where(b - a > forward_min_lag, mean, -np.inf)
         best = np.maximum(best, mean.astype(np.float32))
     return best
 
@@ -120,7 +128,7 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
     key = np.unique(ca[ok].astype(np.int64) * m + cb[ok])
     a, b = key // m, key % m
     zz = np.nan_to_num(z[a, b], nan=-np.inf)
-    seq = _sequence_scores(z, a, b, SEQ_HALF)
+    seq = _sequence_scores(z, a, b, SEQ_HALF, forward_min_lag=FORWARD_LAG_FACTOR * exclude)
     keep = np.maximum(zz, seq) >= candidate_z
     a, b, zz, seq = a[keep], b[keep], zz[keep], seq[keep]
     if a.size > _MAX_CANDIDATES:
@@ -136,7 +144,7 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
             mu, sd = _verify_background(cols, exclude)
             verify = ((score - mu) / sd).astype(np.float32)
     return PairScores(a.astype(np.int64), b.astype(np.int64), zz.astype(np.float32), seq, verify, shift,
-                      sims[a, b], m)
+                      sims[a, b], m, FORWARD_LAG_FACTOR * exclude)
 
 
 def _verify_background(cols: np.ndarray, exclude: int, seed: int = 0) -> tuple[float, float]:
@@ -161,9 +169,12 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
     if ps.verify is not None:
         with_seq = ((ps.seq >= th.seq_z) & (ps.verify >= th.seq_verify_z)
                     & (ps.seq + ps.verify >= th.seq_sum_z))
+        # Pairs a few nodes apart: a corner seen from both sides mirrors like a U-turn,
+        # so there the pair itself must stand out as a lone pair would.
+        with_seq &= (ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z)
         single = (ps.z >= th.single_z) & (ps.verify >= th.single_verify_z)
     else:  # no signatures: no verification, so ask more of both rules
-        with_seq = ps.seq >= th.seq_z + 1.0
+        with_seq = (ps.seq >= th.seq_z + 1.0) & ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z))
         single = ps.z >= th.single_z + 2.0
     ok = np.flatnonzero(with_seq | single)
     if ok.size == 0:
