@@ -52,6 +52,7 @@ class VerifiedThresholds:
     seq_sum_z: float = 5.5    # ... and sequence + verification together
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
     single_verify_z: float = 3.0  # ... and this verification
+    near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()
@@ -170,8 +171,9 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
         with_seq = ((ps.seq >= th.seq_z) & (ps.verify >= th.seq_verify_z)
                     & (ps.seq + ps.verify >= th.seq_sum_z))
         # Pairs a few nodes apart: a corner seen from both sides mirrors like a U-turn,
-        # so there the pair itself must stand out as a lone pair would.
-        with_seq &= (ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z)
+        # so there the pair must stand out alone or be clearly stronger together.
+        with_seq &= ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z)
+                     | (ps.seq + ps.verify >= th.seq_sum_z + th.near_extra_z))
         single = (ps.z >= th.single_z) & (ps.verify >= th.single_verify_z)
     else:  # no signatures: no verification, so ask more of both rules
         with_seq = (ps.seq >= th.seq_z + 1.0) & ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z))
