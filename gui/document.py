@@ -62,6 +62,7 @@ class Document(QObject):
         self.dist_th = 1.0
         self._node_of_frame: dict[int, str] = {}
         self._similarity: Optional[np.ndarray] = None
+        self._rows: Optional[list[LoopRow]] = None
         # Relative yaws estimated from the images for pairs whose loop has none (by key).
         self.estimated_yaws: dict[LoopKey, float] = {}
 
@@ -87,10 +88,20 @@ class Document(QObject):
             topomap.apply_decisions(decisions)
         self.topomap = topomap
         self._similarity = None
+        self._rows = None
         self._index_nodes()
         self._update_positions()
         self.mapReplaced.emit()
         self.evaluate()
+
+    def clear_map(self) -> None:
+        """Forget the map and descriptors (a new recording is being opened)."""
+        self.topomap = None
+        self.descs = None
+        self.evaluation = None
+        self._similarity = None
+        self._rows = None
+        self._node_of_frame = {}
 
     def set_poses(self, poses, path: Optional[str], topic: Optional[str] = None) -> None:
         self.poses, self.poses_path, self.poses_topic = poses, path, topic
@@ -157,6 +168,12 @@ class Document(QObject):
         return dict(data)
 
     def loop_rows(self) -> list[LoopRow]:
+        """The loop arcs in node order (cached until the next edit)."""
+        if self._rows is None:
+            self._rows = self._make_loop_rows()
+        return self._rows
+
+    def _make_loop_rows(self) -> list[LoopRow]:
         if self.topomap is None:
             return []
         g = self.topomap.graph
@@ -220,6 +237,7 @@ class Document(QObject):
         if node is None:
             raise KeyError(f"no node at frame {frame}")
         self.topomap.set_label(node, label)
+        self._rows = None
         self.labelsChanged.emit()
 
     def label_of_frame(self, frame: int) -> str:
@@ -233,6 +251,7 @@ class Document(QObject):
         return nodes
 
     def _after_loop_edit(self) -> None:
+        self._rows = None
         self.loopsChanged.emit()
         self.evaluate()
 

@@ -57,8 +57,12 @@ class GraphView(QWidget):
         self.nodes_item = pg.ScatterPlotItem(size=6, pen=pg.mkPen("w", width=0.5), brush=pg.mkBrush(NODE_COLOR),
                                              name="node", hoverable=True, tip=self._node_tip)
         self.plot.addItem(self.nodes_item)
-        self.ends_item = pg.ScatterPlotItem(size=11, symbol="s", pen=pg.mkPen("k"), brush=pg.mkBrush("#f1c40f"))
-        self.plot.addItem(self.ends_item)
+        self.start_item = pg.ScatterPlotItem(size=13, symbol="t1", pen=pg.mkPen("k"), brush=pg.mkBrush("#2ecc71"),
+                                             name="start")
+        self.end_item = pg.ScatterPlotItem(size=11, symbol="s", pen=pg.mkPen("k"), brush=pg.mkBrush("#f1c40f"),
+                                           name="end")
+        self.plot.addItem(self.start_item)
+        self.plot.addItem(self.end_item)
         self.current_item = pg.ScatterPlotItem(size=16, pen=pg.mkPen(CURRENT_COLOR, width=3), brush=None,
                                                name="current frame")
         self.plot.addItem(self.current_item)
@@ -100,7 +104,8 @@ class GraphView(QWidget):
         else:
             self.sequential_item.setData([], [])
         self.nodes_item.setData(x=self.x, y=self.y, data=np.arange(n))
-        self.ends_item.setData(x=self.x[[0, -1]] if n else [], y=self.y[[0, -1]] if n else [])
+        self.start_item.setData(x=self.x[:1], y=self.y[:1])
+        self.end_item.setData(x=self.x[-1:], y=self.y[-1:])
         self.redraw_loops()
         self.redraw_labels()
         self.set_current_node(self.current_node)

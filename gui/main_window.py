@@ -367,9 +367,7 @@ class MainWindow(QMainWindow):
         self.runner.stop()
         self.undo_stack.clear()
         self._extra_dirty = False
-        self.doc.topomap = None
-        self.doc.descs = None
-        self.doc.evaluation = None
+        self.doc.clear_map()
         self.doc.set_poses(None, None)
         self.doc.session_path = None
         self.doc.describe_settings = settings

@@ -476,3 +476,22 @@ def test_shortcuts_dialog_lists_the_curation_keys(qtbot):
     table = d.layout().itemAt(0).widget()
     keys = {table.item(r, 1).text() for r in range(table.rowCount())}
     assert {"C or Y", "R or N", "Ctrl+Z"} <= keys
+
+
+def test_table_sorting_and_status_filter(qtbot, make_window, recording):
+    w = make_window()
+    open_and_run(qtbot, w, recording["video"])
+    table = w.loop_table
+    table.step(1)
+    selected = table.selected_key()
+    table.view.sortByColumn(3, Qt.DescendingOrder)  # similarity, highest first
+    shown = [table.proxy.index(r, 3).data() for r in range(table.proxy.rowCount())]
+    assert shown == sorted(shown, reverse=True)
+    assert table.selected_key() == selected  # the selection follows its row
+    qtbot.keyClick(table.view, Qt.Key_C)
+    only = table.filter.findText("Confirmed")
+    table.filter.setCurrentIndex(only)
+    assert table.proxy.rowCount() == 1
+    assert table.proxy.index(0, 6).data() == "confirmed"
+    table.filter.setCurrentIndex(table.filter.findText("Undecided (auto)"))
+    assert table.proxy.rowCount() == len(w.doc.loop_rows()) - 1
