@@ -30,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a check
 
 from engine.benchmark import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
                               markdown_table, sum_rows)
+from engine.params import MapParams
 from engine.synth import ROUTES
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -87,9 +88,41 @@ def speed_line(rows: list[Row]) -> str:
             f"256x128 frames, 2 shared CPU cores): median {sorted(fps)[len(fps) // 2]:.1f} sampled frames/s.")
 
 
+def build_map_speed(sizes=(1000, 3000), repeats: int = 3) -> str:
+    """Seconds per build_map (cached descriptors -> map) for ``verified`` and ``ours``.
+
+    Descriptors are a random walk (neighbours alike, every row a node) with random
+    column signatures: a worst case for the number of candidate pairs.
+    """
+    import numpy as np
+
+    from engine.descriptors.base import Descriptors
+    from engine.pipeline import build_map
+
+    rng = np.random.default_rng(0)
+    lines = ["| nodes | verified (s) | ours (s) |", "|---|---|---|"]
+    for n in sizes:
+        v = np.cumsum(rng.normal(size=(n, 256)).astype(np.float32), axis=0) * 0.05
+        v += rng.normal(size=(n, 256)).astype(np.float32)
+        v /= np.linalg.norm(v, axis=1, keepdims=True)
+        cols = rng.normal(size=(n, 128, 32)).astype(np.float16)
+        d = Descriptors(np.arange(n, dtype=float), np.arange(n), np.zeros(n, np.int64), v,
+                        {"shift": True, "descriptor": "effnet-vlad", "frame_width": 256}, cols)
+        times = {}
+        for method in ("verified", "ours"):
+            best = float("inf")
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                build_map(d, MapParams(method=method, node_sim_th=0.99, loop_sim_th=0.5))
+                best = min(best, time.perf_counter() - t0)
+            times[method] = best
+        lines.append(f"| {n} | {times['verified']:.2f} | {times['ours']:.2f} |")
+    return "\n".join(lines)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mode", choices=("paper", "heldout"), default="paper")
+    ap.add_argument("--mode", choices=("paper", "heldout", "speed"), default="paper")
     ap.add_argument("--seeds", default="0", help="paper mode: comma-separated seeds")
     ap.add_argument("--tune-seeds", default="0,1,2")
     ap.add_argument("--test-seeds", default="3,4")
@@ -99,7 +132,10 @@ def main() -> int:
     RESULTS.mkdir(parents=True, exist_ok=True)
     cache = Path(args.cache)
 
-    if args.mode == "paper":
+    if args.mode == "speed":
+        text = "## build_map time (best of 3)\n\n" + build_map_speed() + "\n"
+        out = RESULTS / "build_map_speed.md"
+    elif args.mode == "paper":
         seeds = [int(s) for s in args.seeds.split(",")]
         rows = run(seeds, PAPER_METHODS, cache, args.input_height)
         text = ("## Table I methods on the synthetic routes\n\n" + markdown_table(rows) + "\n\n"
