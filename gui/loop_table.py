@@ -199,8 +199,8 @@ class LoopTable(QWidget):
 
         self.filter = QComboBox()
         self.filter.setToolTip("Show only loops with these statuses")
-        for text, statuses in FILTERS:
-            self.filter.addItem(text, statuses)
+        for text, _statuses in FILTERS:
+            self.filter.addItem(text)
         self.filter.currentIndexChanged.connect(self._filter_changed)
         self.counts = QLabel()
         self.counts.setToolTip("Loops by status")
@@ -310,9 +310,10 @@ class LoopTable(QWidget):
 
     def _filter_changed(self) -> None:
         key = self.selected_key()
-        self.proxy.set_statuses(self.filter.currentData())
-        if key is not None:
-            self.select_key(key)
+        self.proxy.set_statuses(FILTERS[max(self.filter.currentIndex(), 0)][1])
+        row = self.model.row_of(key) if key is not None else None
+        if row is not None and self.proxy.mapFromSource(self.model.index(row, 0)).isValid():
+            self.select_key(key)  # still shown: keep it selected (a hidden one is not forced back)
 
     def _update_counts(self) -> None:
         counts = {s: 0 for s in STATUS_COLORS}
