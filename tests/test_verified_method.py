@@ -72,3 +72,13 @@ def test_ours_is_unchanged_by_the_new_default(described):
     direct = detect_loops(d.vectors[rows], p)
     got = sorted((topomap.graph.nodes[u]["index"], topomap.graph.nodes[v]["index"]) for u, v, _ in topomap.loops())
     assert got == sorted((lc.a, lc.b) for lc in direct)
+
+
+def test_demo_route_crossing_and_u_turn_both_closed():
+    """The demo drives through a crossing, later back over it at 90 degrees, then turns on
+    the spot and drives back: both places get a loop, and nothing else does."""
+    from engine.benchmark import evaluate_route
+
+    (row,) = evaluate_route("demo", "indoor", seed=0, methods=("verified",), people=2)
+    assert row.fp == 0
+    assert row.events_total == 2 and row.events_found == 2
