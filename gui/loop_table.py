@@ -159,8 +159,16 @@ class LoopFilterProxy(QSortFilterProxyModel):
         self.sourceModel().sort(column, order)
 
     def set_statuses(self, statuses: Optional[set[str]]) -> None:
-        self.statuses = statuses
-        self.invalidateFilter()
+        if hasattr(self, "beginFilterChange"):  # Qt >= 6.10; invalidateFilter is deprecated there
+            self.beginFilterChange()
+            self.statuses = statuses
+            self.endFilterChange()
+        else:
+            self.statuses = statuses
+            self.invalidateFilter()
+
+    def refilter(self) -> None:
+        self.set_statuses(self.statuses)
 
     def filterAcceptsRow(self, source_row: int, source_parent: QModelIndex) -> bool:
         if self.statuses is None:
@@ -299,7 +307,7 @@ class LoopTable(QWidget):
         key = self.selected_key() or self._last_key
         self.model.refresh()
         if self.proxy.statuses is not None:
-            self.proxy.invalidateFilter()  # statuses changed: rows may enter or leave the filter
+            self.proxy.refilter()  # statuses changed: rows may enter or leave the filter
         self._update_counts()
         if key is not None and self.model.row_of(key) is not None:
             row = self.proxy.mapFromSource(self.model.index(self.model.row_of(key), 0)).row()

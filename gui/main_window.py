@@ -73,6 +73,9 @@ class MainWindow(QMainWindow):
         self._update_title()
         self._update_actions()
 
+        app = QApplication.instance()
+        if app is not None:  # the thread must end before Qt does, whatever closes the app
+            app.aboutToQuit.connect(self.runner.stop)
         self.autosave_timer = QTimer(self)
         self.autosave_timer.setInterval(int(1000 * self.defaults["ui"].get("autosave_seconds", 30)))
         self.autosave_timer.timeout.connect(self.autosave)
@@ -828,10 +831,10 @@ class MainWindow(QMainWindow):
             self.tabs.setCurrentIndex(view["tab"])
         if isinstance(view.get("filter"), int):
             self.loop_table.filter.setCurrentIndex(view["filter"])
-        if isinstance(view.get("frame"), int) and view["frame"] >= 0:
-            self.frame_viewer.show_frame(view["frame"])
         if isinstance(view.get("selected"), list) and len(view["selected"]) == 2:
             self.select_loop(tuple(int(f) for f in view["selected"]))
+        if isinstance(view.get("frame"), int) and view["frame"] >= 0:  # after the selection, which moves it
+            self.frame_viewer.show_frame(view["frame"])
 
     def maybe_save(self) -> bool:
         """Ask before unsaved work is dropped; False means stay."""

@@ -145,7 +145,9 @@ def test_whole_session_open_run_curate_undo_save_reopen_export(qtbot, make_windo
     w.undo_stack.redo()
     assert statuses(w)[second] == "rejected"
 
-    # Save, close, reopen: the decisions come back.
+    # Save, close, reopen: the decisions (and where the user was) come back.
+    w.frame_viewer.show_frame(33)
+    selected = w.loop_table.selected_key()
     assert w.save_session()
     session_file = session_path_for(video)
     assert session_file.is_file() and not w.isWindowModified()
@@ -157,6 +159,8 @@ def test_whole_session_open_run_curate_undo_save_reopen_export(qtbot, make_windo
     assert statuses(w2)[first] == "confirmed"
     assert statuses(w2)[second] == "rejected"
     assert not w2.isWindowModified()
+    assert w2.loop_table.selected_key() == selected
+    assert w2.frame_viewer.current_frame == 33
 
     # Export the corrected graph: rejected left out, confirmed kept with its status.
     out = tmp_path / "corrected.graphml"
@@ -495,3 +499,32 @@ def test_table_sorting_and_status_filter(qtbot, make_window, recording):
     assert table.proxy.index(0, 6).data() == "confirmed"
     table.filter.setCurrentIndex(table.filter.findText("Undecided (auto)"))
     assert table.proxy.rowCount() == len(w.doc.loop_rows()) - 1
+
+
+def test_node_panel_names_a_place(qtbot, make_window, recording):
+    w = make_window()
+    open_and_run(qtbot, w, recording["video"])
+    frame = int(w.doc.node_frames()[4])
+    w.frame_viewer.show_frame(frame)
+    assert w.node_panel.node_index == 4
+    w.node_panel.name.setFocus()
+    qtbot.keyClicks(w.node_panel.name, "lab door")
+    qtbot.keyClick(w.node_panel.name, Qt.Key_Return)
+    assert w.doc.label_of_frame(frame) == "lab door"
+    assert "lab door" in w.frame_viewer.info.text()
+    w.undo_stack.undo()
+    assert w.doc.label_of_frame(frame) == ""
+
+
+def test_progress_bar_and_eta_follow_the_run(qtbot, make_window, recording):
+    w = make_window()
+    w.params_panel.interval.setValue(1.5)  # not cached by other tests: a real describe with progress
+    seen = []
+    w.runner.progress.connect(lambda done, total, stage: seen.append((done, total, stage)))
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        assert w.open_path(str(recording["video"]))
+        qtbot.waitUntil(lambda: any(t > 0 for _, t, _ in seen), timeout=RUN_TIMEOUT)
+        assert w.progress_bar.isVisible() and w.cancel_button.isEnabled()
+        assert w.progress_bar.maximum() > 0 and ":" in w.progress_bar.format()
+    assert not w.progress_bar.isVisible()
+    assert seen[-1][0] <= seen[-1][1] or seen[-1][1] == 0
