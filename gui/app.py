@@ -19,6 +19,18 @@ def _ensure_platform(headless: bool) -> None:
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
 
+def _quiet_offscreen_warnings() -> None:
+    """The offscreen platform warns about every window resize; keep stderr for real messages."""
+    from PySide6.QtCore import qInstallMessageHandler
+
+    def handler(mode, context, message: str) -> None:
+        if "propagateSizeHints" not in message:
+            sys.stderr.write(message + "\n")
+
+    if os.environ.get("QT_QPA_PLATFORM") == "offscreen":
+        qInstallMessageHandler(handler)
+
+
 def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
     """Open the window (and INPUT); with ``screenshot``, save a picture and return."""
     _ensure_platform(screenshot is not None)
@@ -27,6 +39,7 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
 
     from .main_window import MainWindow
 
+    _quiet_offscreen_warnings()
     app = QApplication.instance() or QApplication([sys.argv[0] if sys.argv else "panotopo"])
     app.setApplicationName("panotopo")
     app.setOrganizationName("panotopo")

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .layout import path_layout
-from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
+from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR,
                     STATUS_LABELS, status_pen)
 
 CLICK_RADIUS_PX = 9
@@ -42,7 +42,7 @@ class GraphView(QWidget):
         self.plot.showGrid(x=True, y=True, alpha=0.15)
         self.plot.setMenuEnabled(False)
         self.plot.getPlotItem().hideButtons()
-        self.legend = self.plot.addLegend(offset=(8, 8), labelTextColor="#222", brush=pg.mkBrush(255, 255, 255, 220),
+        self.legend = self.plot.addLegend(offset=(8, 8), labelTextColor="#222", brush=pg.mkBrush(255, 255, 255, 150),
                                           pen=pg.mkPen("#bbb"))
         self.selected_item = pg.PlotDataItem(pen=pg.mkPen(pg.mkColor(SELECTED_COLOR), width=7))
         self.selected_item.setOpacity(0.45)

@@ -15,7 +15,7 @@ from typing import Optional
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QCloseEvent, QDragEnterEvent, QDropEvent, QIcon, QKeySequence, QUndoStack
 from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDialog, QLabel, QMainWindow,
-                               QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget, QWidget)
+                               QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget)
 
 from engine.errors import InputError
 from engine.params import MapParams
@@ -577,10 +577,17 @@ class MainWindow(QMainWindow):
         self._pending_decisions = None
         self.doc.describe_settings = result.job.settings
         self._defaults = descriptor_defaults(result.descs)
-        if self.doc.descs is not None and self.doc.descs is not result.descs:
-            pass  # descriptors replaced below
         self._set_known_shifts(result.descs)
-        self.doc.replace_map(result.topomap, result.descs, decisions)
+        topomap = result.topomap
+        if result.job.params != self.doc.params and self.doc.params.uses_shift == result.job.params.uses_shift:
+            # The user changed a map parameter while the run was going: honour it now.
+            from engine.pipeline import build_map
+
+            try:
+                topomap = build_map(result.descs, self.doc.params, source=str(result.job.path))
+            except InputError as exc:
+                self.warn(str(exc))
+        self.doc.replace_map(topomap, result.descs, decisions)
         self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
         self.params_panel.set_params(self.doc.params, self._defaults)
         self._restore_view()
@@ -769,9 +776,10 @@ class MainWindow(QMainWindow):
             self.node_panel.show_node(k)
 
     def select_first_loop(self) -> bool:
+        """Select the first candidate in the table (if none is selected); False when there is none."""
         rows = self.loop_table.proxy.rowCount()
-        if rows:
-            self.loop_table.step(1) if self.loop_table.selected_key() is None else None
+        if rows and self.loop_table.selected_key() is None:
+            self.loop_table.step(1)
         return rows > 0
 
     # ==== sessions =========================================================================
