@@ -528,3 +528,22 @@ def test_progress_bar_and_eta_follow_the_run(qtbot, make_window, recording):
         assert w.progress_bar.maximum() > 0 and ":" in w.progress_bar.format()
     assert not w.progress_bar.isVisible()
     assert seen[-1][0] <= seen[-1][1] or seen[-1][1] == 0
+
+
+def test_failed_run_keeps_map_and_decisions(qtbot, make_window, recording, tmp_path, dialogs):
+    import shutil
+
+    video = tmp_path / "copy.mp4"
+    shutil.copy(recording["video"], video)
+    w = make_window()
+    open_and_run(qtbot, w, video)
+    w.loop_table.step(1)
+    qtbot.keyClick(w.loop_table.view, Qt.Key_C)
+    topomap, decisions = w.doc.topomap, w.doc.decisions()
+    video.write_bytes(b"the recording got damaged")  # the next describe cannot read it
+    w.params_panel.interval.setValue(2.0)
+    with qtbot.waitSignal(w.runFailed, timeout=RUN_TIMEOUT):
+        w.start_run()
+    assert w.doc.topomap is topomap and w.doc.decisions() == decisions
+    assert [k for k, _ in dialogs] == ["critical"] and "Traceback" not in dialogs[0][1]
+    assert not w.runner.running and w.isWindowModified()
