@@ -10,7 +10,9 @@ roll, ~0 unrelated) and its shift is the relative heading.
 
 Yaw convention (same as ``engine.shift.relative_yaw``): the yaw of pair (a, b) is how
 far, in degrees, the content of frame a appears displaced in frame b (positive towards
-increasing column) in the ORIGINAL, unshifted frames.
+increasing column) in the ORIGINAL, unshifted frames. On the synthetic routes this is
+the robot's heading change from node a to node b in degrees, counter-clockwise positive
+(tests/test_verified_method.py checks it against ground truth).
 """
 
 from __future__ import annotations
