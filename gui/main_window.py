@@ -355,9 +355,7 @@ class MainWindow(QMainWindow):
                 if chosen is None:
                     return False
                 topic, pose_topic = chosen
-            from engine.sources import open_recording
-
-            source = open_recording(p, topic=topic)
+            source = self._open_recording_in_background(p, topic)
             if session is not None and session.describe:
                 settings = _describe_settings(session.describe, self.describe_options)
             else:
@@ -399,6 +397,19 @@ class MainWindow(QMainWindow):
             self.doc.session_path = path
             self._update_title()
         return ok
+
+    def _open_recording_in_background(self, p: Path, topic: Optional[str]):
+        """Open and index a recording off the UI thread (a long video or a big bag takes a while)."""
+        from engine.sources import open_recording
+
+        from .background import call_in_background
+
+        def open_and_index():
+            source = open_recording(p, topic=topic)
+            source.stamps()  # the one pass over the recording; cached by the source
+            return source
+
+        return call_in_background(self, f"Reading {p.name}…", open_and_index)
 
     def _source_for_descriptors(self, descs):
         """The recording a descriptors file was made from, if it is still there (for the viewer)."""
