@@ -27,10 +27,29 @@ _SAMPLE = 384
 _MAD_TO_SD = 1.4826
 
 
+def _nanmedian_rows(values: np.ndarray) -> np.ndarray:
+    """Median of each row ignoring NaNs (NaN for all-NaN rows), by one sort: NaNs sort last.
+
+    The same numbers as ``np.nanmedian(values, axis=1)``, several times faster for the
+    (nodes x sample) background blocks.
+    """
+    s = np.sort(values, axis=1)
+    cnt = np.count_nonzero(~np.isnan(values), axis=1)
+    rows = np.arange(s.shape[0])
+    lo = s[rows, np.maximum((cnt - 1) // 2, 0)]
+    hi = s[rows, np.minimum(cnt // 2, s.shape[1] - 1)]
+    med = np.where(cnt % 2 == 1, lo, 0.5 * (lo + hi))
+    return np.where(cnt > 0, med, np.nan)
+
+
 def robust_stats(values: np.ndarray, axis: int = -1) -> tuple[np.ndarray, np.ndarray]:
     """Median and MAD-based spread along ``axis`` (NaNs ignored); spread floored at 1e-3."""
-    med = np.nanmedian(values, axis=axis)
-    mad = np.nanmedian(np.abs(values - np.expand_dims(med, axis)), axis=axis)
+    if values.ndim == 2 and axis in (1, -1):
+        med = _nanmedian_rows(values)
+        mad = _nanmedian_rows(np.abs(values - med[:, None]))
+    else:
+        med = np.nanmedian(values, axis=axis)
+        mad = np.nanmedian(np.abs(values - np.expand_dims(med, axis)), axis=axis)
     return med, np.maximum(mad * _MAD_TO_SD, 1e-3)
 
 
@@ -81,9 +100,14 @@ def zscores(sims: np.ndarray, exclude: int, max_lag: int | None = None) -> np.nd
     against the pairs at the same lag is used too, and the smaller of the two kept.
     """
     mu, sd = background(sims, exclude)
-    centre = 0.5 * (mu[:, None] + mu[None, :])
-    spread = np.sqrt(0.5 * (sd[:, None] ** 2 + sd[None, :] ** 2))
-    z = ((sims - centre) / spread).astype(np.float32)
+    half_mu = (0.5 * mu).astype(np.float32)
+    half_var = (0.5 * sd.astype(np.float32) ** 2)
+    # In place, in float32: a few (m, m) passes instead of several temporaries.
+    z = np.asarray(sims, np.float32) - half_mu[:, None]
+    z -= half_mu[None, :]
+    spread = half_var[:, None] + half_var[None, :]
+    np.sqrt(spread, out=spread)
+    z /= spread
     m = sims.shape[0]
     max_lag = 4 * exclude + 8 if max_lag is None else int(max_lag)
     if m > 1 and max_lag > 0:

@@ -108,12 +108,15 @@ def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int,
 
 
 def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], exclude: int,
-                candidate_z: float = _CANDIDATE_Z) -> PairScores:
+                candidate_z: float = _CANDIDATE_Z,
+                only_for: Optional[VerifiedThresholds] = None) -> PairScores:
     """Calibrated, sequence and verification scores of all plausible pairs.
 
     Cheap for thousands of nodes: the sequence score needs at least one pair of its
     diagonal run to stand out, so only the neighbourhoods (along both diagonals) of
-    pairs with z >= candidate_z are scored, never the whole matrix.
+    pairs with z >= candidate_z are scored, never the whole matrix. With ``only_for``
+    given, pairs that no rule of ``select`` with those thresholds could accept are
+    dropped before the (costly) alignment: ``select`` then returns the same loops.
     """
     v = np.asarray(node_vectors, dtype=np.float32)
     m = v.shape[0]
@@ -135,6 +138,9 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
     if a.size > _MAX_CANDIDATES:
         top = np.sort(np.argsort(-np.maximum(zz, seq), kind="stable")[:_MAX_CANDIDATES])
         a, b, zz, seq = a[top], b[top], zz[top], seq[top]
+    if only_for is not None:   # every rule of select needs one of these
+        can = (seq >= only_for.seq_z) | (zz >= only_for.single_z)
+        a, b, zz, seq = a[can], b[can], zz[can], seq[can]
     verify = shift = None
     if node_columns is not None:
         cols = np.asarray(node_columns)
@@ -208,7 +214,7 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     """Loop candidates of the ``verified`` method, sorted by (a, b), with yaw where known."""
     from .loops import LoopCandidate
 
-    ps = score_pairs(node_vectors, node_columns, int(params.neighbor_node_num))
+    ps = score_pairs(node_vectors, node_columns, int(params.neighbor_node_num), only_for=thresholds)
     chosen = select(ps, thresholds)
     yaw = None
     if ps.shift is not None and chosen.size and node_shifts is not None and frame_width > 0:
