@@ -147,26 +147,24 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
         verify = np.zeros(a.size, np.float32)
         shift = np.zeros(a.size, np.int64)
         if a.size:
-            score, shift = align_nodes(cols, a, b)
-            mu, sd = _verify_background(cols, exclude)
+            ba, bb = _background_pairs(m, exclude)
+            # One alignment call for candidates and background: each node's spectrum once.
+            score, shift = align_nodes(cols, np.concatenate([a, ba]), np.concatenate([b, bb]))
+            score, shift, back = score[:a.size], shift[:a.size], score[a.size:]
+            mu, sd = robust_stats(back.astype(np.float64)) if back.size >= 10 else (0.0, 1.0)
             verify = ((score - mu) / sd).astype(np.float32)
     return PairScores(a.astype(np.int64), b.astype(np.int64), zz.astype(np.float32), seq, verify, shift,
                       sims[a, b], m, FORWARD_LAG_FACTOR * exclude)
 
 
-def _verify_background(cols: np.ndarray, exclude: int, seed: int = 0) -> tuple[float, float]:
-    """Median and spread of alignment scores of random temporally distant pairs."""
-    m = cols.shape[0]
+def _background_pairs(m: int, exclude: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``_VERIFY_SAMPLE`` random temporally distant pairs: what "different places"
+    score when aligned, the reference of the verification z-scores."""
     rng = np.random.default_rng(seed)
     a = rng.integers(0, m, _VERIFY_SAMPLE * 2)
     b = rng.integers(0, m, _VERIFY_SAMPLE * 2)
     ok = np.abs(a - b) > exclude
-    a, b = a[ok][:_VERIFY_SAMPLE], b[ok][:_VERIFY_SAMPLE]
-    if a.size < 10:
-        return 0.0, 1.0
-    score, _ = align_nodes(cols, a, b)
-    mu, sd = robust_stats(score.astype(np.float64))
-    return float(mu), float(sd)
+    return a[ok][:_VERIFY_SAMPLE].astype(np.int64), b[ok][:_VERIFY_SAMPLE].astype(np.int64)
 
 
 def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.ndarray:
