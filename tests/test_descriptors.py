@@ -9,6 +9,7 @@ import pytest
 import engine.descriptors as registry
 from engine.descriptors.base import Descriptors
 from engine.descriptors.cache import DescriptorCache, cache_key
+from engine.descriptors.efficientnet import sector_vlad, sector_weights
 from engine.errors import Cancelled, InputError
 from engine.shift import apply_shift, canonical_shift
 
@@ -42,6 +43,52 @@ def test_bad_options():
         registry.get("effnet-vlad", not_an_option=1)
     with pytest.raises(InputError):
         registry.get("effnet-vlad", vocabulary=np.ones((4, 3)))
+    with pytest.raises(InputError):
+        registry.get("effnet-vlad", layout="grid")
+    with pytest.raises(InputError):
+        registry.get("effnet-vlad", sectors=1)
+
+
+def test_layout_is_part_of_the_settings():
+    plain = registry.get("effnet-vlad", layout="global", **SMALL)
+    sectors = registry.get("effnet-vlad", **SMALL)
+    three = registry.get("effnet-vlad", sectors=3, **SMALL)
+    assert len({str(m.settings()) for m in (plain, sectors, three)}) == 3
+    assert plain.dimension == 32 * plain.channels
+    assert three.dimension == 4 * 32 * three.channels
+
+
+def unit_rows(rng, n: int, c: int) -> np.ndarray:
+    x = rng.normal(size=(n, c)).astype(np.float32)
+    return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+
+def test_sector_vlad_turns_with_the_feature_map():
+    """Rolling the feature map by one sector (90 degrees) moves each sector's block to its
+    neighbour and leaves the global part unchanged: the layout is heading-sensitive,
+    exactly as a camera turn."""
+    rng = np.random.default_rng(0)
+    rows, width, k, c = 8, 16, 6, 10
+    feats = unit_rows(rng, rows * width, c)
+    centres = unit_rows(rng, k, c)
+    v = sector_vlad(feats, centres, width, 4)
+    rolled = np.roll(feats.reshape(rows, width, c), -width // 4, axis=1).reshape(-1, c)  # content moves left
+    r = sector_vlad(rolled, centres, width, 4)
+    assert v.shape == r.shape == (5 * k * c,)
+    np.testing.assert_allclose(np.linalg.norm(v), 1.0, atol=1e-6)
+    gv, gr = v[:k * c], r[:k * c]
+    np.testing.assert_allclose(gv, gr, atol=1e-6)
+    sv, sr = v[k * c:].reshape(4, -1), r[k * c:].reshape(4, -1)
+    np.testing.assert_allclose(sr, np.roll(sv, -1, axis=0), atol=1e-6)   # new sector s = old s + 1
+    assert not np.allclose(sv, sr, atol=1e-3)   # and so the rolled copy is another vector
+
+
+def test_sector_windows_overlap_and_cover_every_column():
+    w = sector_weights(16, 4)
+    assert w.shape == (4, 16)
+    assert np.all(w.sum(axis=0) > 0.5)            # no column is left out
+    assert np.all((w > 0.05).sum(axis=0) >= 2)    # every column is shared by two sectors
+    np.testing.assert_allclose(w[1], np.roll(w[0], 4), atol=1e-6)   # sectors are turned copies
 
 
 # -- images ----------------------------------------------------------------------------
@@ -111,7 +158,9 @@ def described(scene):
 def test_effnet_rows_are_unit_float32(described):
     model, _, vecs, calls = described
     assert vecs.dtype == np.float32
-    assert vecs.shape == (6, 32 * model.channels) == (6, model.dimension)
+    # Default layout: the global VLAD and 4 sector VLADs.
+    assert model.layout == "sectors" and model.sectors == 4
+    assert vecs.shape == (6, 5 * 32 * model.channels) == (6, model.dimension)
     np.testing.assert_allclose(np.linalg.norm(vecs, axis=1), 1.0, atol=1e-5)
     assert model.vocabulary.shape == (32, model.channels)
     # Progress per batch of 4: after 4, then after 6, stage "describe".
@@ -162,8 +211,7 @@ def test_shift_raises_similarity_of_rotated_copy(pano, full):
     w = full.shape[1]
     turned = degrade(np.roll(full, -int(w * 0.37), axis=1), 7)
     others = [city(3), city(4), np.ascontiguousarray(pano[::-1])]
-    # VLAD pools features, so it is nearly roll-invariant already; what the shift fixes is the
-    # seam and the position-dependent receptive fields: measured 0.62 -> 0.71 here (224 px input).
+    # The sector layout is heading-sensitive, so the turned copy only matches once both are shifted.
     model = registry.get("effnet-vlad", input_height=224)
     plain = model.describe(iter([pano, turned] + others), 5)
     shifted_imgs = [apply_shift(im, canonical_shift(im)) for im in [pano, turned] + others]

