@@ -1,5 +1,7 @@
 """Thresholds from the recording itself: z-scores, lag background, automatic thresholds."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -69,3 +71,21 @@ def test_loop_threshold_is_above_the_background():
     assert np.median(sims[far]) < th < 1.0
     assert np.mean(sims[far] >= th) < 0.01
     assert set(paper_thresholds(v)) == {"node_sim_th", "loop_sim_th"}
+
+
+def test_row_medians_with_gaps_match_numpy():
+    from engine.calibrate import robust_stats
+
+    rng = np.random.default_rng(3)
+    for cols in (1, 2, 7, 8, 384):
+        x = rng.normal(size=(40, cols)).astype(np.float32)
+        x[rng.random(x.shape) < 0.3] = np.nan
+        x[0] = np.nan                      # a row with no value at all
+        mu, sd = robust_stats(x, axis=1)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # numpy warns about the empty row
+            ref = np.nanmedian(x, axis=1)
+            ref_mad = np.nanmedian(np.abs(x - ref[:, None]), axis=1) * 1.4826
+        np.testing.assert_allclose(mu, ref, equal_nan=True)
+        ok = ~np.isnan(ref)
+        np.testing.assert_allclose(sd[ok], np.maximum(ref_mad[ok], 1e-3), rtol=1e-6)

@@ -82,3 +82,18 @@ def test_demo_route_crossing_and_u_turn_both_closed():
     (row,) = evaluate_route("demo", "indoor", seed=0, methods=("verified",), people=2)
     assert row.fp == 0
     assert row.events_total == 2 and row.events_found == 2
+
+
+def test_scoring_only_what_a_rule_could_accept_keeps_the_same_loops(described):
+    from engine.calibrate import node_threshold
+    from engine.loops_verified import DEFAULT_THRESHOLDS, score_pairs, select
+
+    d = described.by_shift[True]
+    rows = make_nodes(d.vectors, node_threshold(d.vectors))
+    full = score_pairs(d.vectors[rows], d.columns[rows], 5)
+    lean = score_pairs(d.vectors[rows], d.columns[rows], 5, only_for=DEFAULT_THRESHOLDS)
+    assert lean.a.size < full.a.size            # the filter drops pairs before alignment ...
+    pick_full, pick_lean = select(full), select(lean)
+    assert pick_full.size > 0                   # ... and the accepted loops stay the same
+    assert set(zip(full.a[pick_full], full.b[pick_full])) == set(zip(lean.a[pick_lean], lean.b[pick_lean]))
+    np.testing.assert_allclose(full.verify[pick_full], lean.verify[pick_lean], rtol=1e-5)
