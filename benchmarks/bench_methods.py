@@ -1,7 +1,7 @@
 """Methods benchmark on synthetic routes: the paper's Table I methods and ``verified``.
 
     python benchmarks/bench_methods.py --mode paper   [--seeds 0]
-    python benchmarks/bench_methods.py --mode heldout [--tune-seeds 0,1,2 --test-seeds 3,4]
+    python benchmarks/bench_methods.py --mode heldout [--tune-seeds 0,1,2 --test-seeds 3,4] [--out FILE.md]
 
 ``paper``: one table like the paper's Tables II-V (TP, FP, TN, FN, precision, recall,
 accuracy, F1, revisit events per route and look) for simple, shift-simple and ours,
@@ -80,6 +80,21 @@ def summary_table(rows: list[Row], methods) -> str:
     return "\n".join(lines)
 
 
+def look_table(rows: list[Row], methods) -> str:
+    """Per route type and look: the same totals, to show where each method fails."""
+    lines = ["| route | look | method | runs | false loops | events found | precision | recall | F1 |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for route in ROUTE_TYPES:
+        for look in LOOKS:
+            sel = [r for r in rows if r.route == route and r.look == look]
+            for m in methods:
+                t = sum_rows(sel, m)
+                lines.append(f"| {route} | {look} | {m} | {t['runs']} | {t['fp']} | "
+                             f"{t['events_found']}/{t['events_total']} | {t['precision']:.3f} | "
+                             f"{t['recall']:.3f} | {t['f1']:.3f} |")
+    return "\n".join(lines)
+
+
 def speed_line(rows: list[Row]) -> str:
     fps = [r.extraction_fps for r in rows if r.extraction_fps > 0]
     if not fps:
@@ -128,6 +143,7 @@ def main() -> int:
     ap.add_argument("--test-seeds", default="3,4")
     ap.add_argument("--cache", default="/tmp/ptb")
     ap.add_argument("--input-height", type=int, default=128)
+    ap.add_argument("--out", default="", help="heldout mode: file name under benchmarks/results/")
     args = ap.parse_args()
     RESULTS.mkdir(parents=True, exist_ok=True)
     cache = Path(args.cache)
@@ -144,12 +160,17 @@ def main() -> int:
     else:
         parts = []
         for label, seeds in (("tuning seeds", args.tune_seeds), ("held-out seeds", args.test_seeds)):
+            if not seeds:   # e.g. --tune-seeds "": report the held-out seeds only
+                continue
             seeds = [int(s) for s in seeds.split(",")]
             rows = run(seeds, ALL_METHODS, cache, args.input_height)
             parts.append(f"## {label} {seeds}\n\n" + summary_table(rows, ALL_METHODS) + "\n\n<details><summary>"
-                         f"per recording</summary>\n\n" + markdown_table(rows) + "\n\n</details>\n")
-        text = "\n".join(parts) + "\n" + speed_line(rows) + "\n"
-        out = RESULTS / "methods_heldout.md"
+                         f"per route type and look</summary>\n\n" + look_table(rows, ALL_METHODS)
+                         + "\n\n</details>\n\n<details><summary>per recording</summary>\n\n"
+                         + markdown_table(rows) + "\n\n</details>\n")
+        text = (f"Descriptor cache: {cache} (one descriptor and panorama-shift version per cache).\n\n"
+                + "\n".join(parts) + "\n" + speed_line(rows) + "\n")
+        out = RESULTS / (args.out or "methods_heldout.md")
     out.write_text(text)
     print(text)
     print(f"wrote {out}", file=sys.stderr)
