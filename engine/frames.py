@@ -108,6 +108,24 @@ class FrameSource(ABC):
         self.close()
 
 
+class IndexedSource(FrameSource):
+    """A source that learns every stamp and the resolution when it opens (folders, bags)."""
+
+    _stamps: np.ndarray
+    _resolution: tuple[int, int]
+
+    @property
+    def frame_count(self) -> int:
+        return int(self._stamps.size)
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self._resolution
+
+    def stamps(self) -> np.ndarray:
+        return self._stamps.copy()
+
+
 def open_source(path: str | Path, topic: Optional[str] = None, interval: float = 1.0) -> FrameSource:
     """Open any supported recording; raises InputError with a clear reason.
 

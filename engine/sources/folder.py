@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..frames import Frame, FrameSource, check_equirectangular
+from ..frames import Frame, IndexedSource, check_equirectangular
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 STAMPS_FILE = "stamps.csv"
@@ -93,7 +93,7 @@ def _float(text: str, where: str, line: int) -> float:
     return value
 
 
-class FolderSource(FrameSource):
+class FolderSource(IndexedSource):
     """Image files of a folder, in natural name order."""
 
     def __init__(self, path: str | Path, interval: float = 1.0) -> None:
@@ -122,17 +122,6 @@ class FolderSource(FrameSource):
         rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         check_equirectangular(rgb, str(file))
         return rgb
-
-    @property
-    def frame_count(self) -> int:
-        return len(self.files)
-
-    @property
-    def resolution(self) -> tuple[int, int]:
-        return self._resolution
-
-    def stamps(self) -> np.ndarray:
-        return self._stamps.copy()
 
     def frame_at(self, index: int) -> Frame:
         if not 0 <= index < len(self.files):

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..frames import Frame, FrameSource, check_equirectangular, sample_indices
+from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = (
@@ -182,7 +182,7 @@ def message_to_rgb(msg: Any, msgtype: str) -> np.ndarray:
 # --- the frame source -----------------------------------------------------------
 
 
-class BagSource(FrameSource):
+class BagSource(IndexedSource):
     """Frames of one image topic of a ROS1 or ROS2 bag."""
 
     def __init__(self, path: str | Path, topic: Optional[str] = None) -> None:
@@ -224,17 +224,6 @@ class BagSource(FrameSource):
         self._rank = np.asarray(ranks, dtype=np.int64)[self._order]
         self._stamps = stamps[self._order].astype(np.float64) * 1e-9
         self._in_bag_order = bool(np.all(self._order == np.arange(self._order.size)))
-
-    @property
-    def frame_count(self) -> int:
-        return int(self._stamps.size)
-
-    @property
-    def resolution(self) -> tuple[int, int]:
-        return self._resolution
-
-    def stamps(self) -> np.ndarray:
-        return self._stamps.copy()
 
     def frame_at(self, index: int) -> Frame:
         if not 0 <= index < self.frame_count:
