@@ -47,7 +47,7 @@ _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
 
 @dataclass(frozen=True)
 class VerifiedThresholds:
-    seq_z: float = 3.0        # sequence support (mean z along the diagonal)
+    seq_z: float = 3.3        # sequence support (mean z along the diagonal)
     seq_verify_z: float = 1.5  # verification needed with sequence support ...
     seq_sum_z: float = 5.5    # ... and sequence + verification together
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
