@@ -38,7 +38,9 @@ class Descriptors:
         """The added, optional .npz keys that are set (for writers of the file)."""
         return {} if self.columns is None else {"columns": np.asarray(self.columns, np.float16)}
 
-    def save(self, path: str | Path) -> None:
+    def save(self, path: str | Path, vector_dtype=np.float32) -> None:
+        """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
+        contract's files (``panotopo describe``) keep float32."""
         path = Path(path)
         tmp = path.with_name(path.name + ".tmp.npz")
         np.savez(
@@ -46,7 +48,7 @@ class Descriptors:
             stamps=np.asarray(self.stamps, np.float64),
             frames=np.asarray(self.frames, np.int64),
             shifts=np.asarray(self.shifts, np.int64),
-            descriptors=np.asarray(self.vectors, np.float32),
+            descriptors=np.asarray(self.vectors, vector_dtype),
             meta=np.array(json.dumps(self.meta)),
             **self.optional_arrays(),
         )

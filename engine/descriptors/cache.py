@@ -74,12 +74,9 @@ class DescriptorCache:
     def store(self, key: str, descs: Descriptors) -> Path:
         """Write ``descs`` under ``key`` (atomically); long vectors go to disk as float16."""
         self.root.mkdir(parents=True, exist_ok=True)
-        vectors = np.asarray(descs.vectors)
-        if vectors.ndim == 2 and vectors.shape[1] >= FLOAT16_FROM_DIM:
-            vectors = vectors.astype(np.float16)
-        compact = Descriptors(descs.stamps, descs.frames, descs.shifts, vectors, descs.meta, descs.columns)
+        long = descs.vectors.ndim == 2 and descs.vectors.shape[1] >= FLOAT16_FROM_DIM
         path = self.path_for(key)
-        _save_keep_dtype(compact, path)
+        descs.save(path, vector_dtype=np.float16 if long else np.float32)
         return path
 
     def clear(self) -> None:
@@ -87,17 +84,3 @@ class DescriptorCache:
         if self.root.is_dir():
             shutil.rmtree(self.root, ignore_errors=True)
 
-
-def _save_keep_dtype(descs: Descriptors, path: Path) -> None:
-    """Like ``Descriptors.save`` (atomic temp file + rename) but keeps float16 vectors as they are."""
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(
-        tmp,
-        stamps=np.asarray(descs.stamps, np.float64),
-        frames=np.asarray(descs.frames, np.int64),
-        shifts=np.asarray(descs.shifts, np.int64),
-        descriptors=descs.vectors,
-        meta=np.array(json.dumps(descs.meta)),
-        **descs.optional_arrays(),
-    )
-    tmp.replace(path)
