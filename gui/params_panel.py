@@ -147,9 +147,20 @@ class ParamsPanel(QWidget):
             self.describeEdited.emit()
 
     def _enable_for_method(self) -> None:
-        ours = self.method.currentData() not in ("simple", "shift-simple")
-        for w in (self.window_size, self.count_th, self.neighbor_node_num):
-            w.setEnabled(ours)
+        """Only the parameters the chosen method reads can be edited."""
+        used = PARAMS_USED.get(self.method.currentData(), set(PARAMS_USED["ours"]))
+        for name in PARAMS_USED["ours"]:
+            getattr(self, name).setEnabled(name in used)
+
+
+# Which map parameters each method reads (engine/loops.py, engine/loops_verified.py):
+# "verified" calibrates its own thresholds and has no window.
+PARAMS_USED = {
+    "simple": {"node_sim_th", "loop_sim_th"},
+    "shift-simple": {"node_sim_th", "loop_sim_th"},
+    "ours": {"node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"},
+    "verified": {"node_sim_th", "neighbor_node_num"},
+}
 
 
 def _double(lo: float, hi: float, step: float, tip: str) -> QDoubleSpinBox:

@@ -47,3 +47,4 @@ def test_errors_are_raised_in_the_caller(widget):
 
     with pytest.raises(InputError, match="unreadable"):
         call_in_background(widget, "working", bad)
+
