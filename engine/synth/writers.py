@@ -105,13 +105,7 @@ def write_ros1_bag(
     messages = _messages(typestore, frames, stamps, topic, compressed, encoding,
                          poses, pose_topic, pose_type, image_format, jpeg_quality, ros1=True)
     with Writer(path) as writer:
-        connections: dict[str, Any] = {}
-        for t_ns, topic_name, msg in messages:
-            if topic_name not in connections:
-                connections[topic_name] = writer.add_connection(
-                    topic_name, msg.__msgtype__, typestore=typestore)
-            writer.write(connections[topic_name], t_ns,
-                         typestore.serialize_ros1(msg, msg.__msgtype__))
+        _write_messages(writer, typestore, messages, typestore.serialize_ros1)
     return path
 
 
@@ -147,17 +141,20 @@ def write_ros2_bag(
     messages = _messages(typestore, frames, stamps, topic, compressed, encoding,
                          poses, pose_topic, pose_type, image_format, jpeg_quality, ros1=False)
     with Writer(path, version=9, storage_plugin=plugins[storage]) as writer:
-        connections: dict[str, Any] = {}
-        for t_ns, topic_name, msg in messages:
-            if topic_name not in connections:
-                connections[topic_name] = writer.add_connection(
-                    topic_name, msg.__msgtype__, typestore=typestore)
-            writer.write(connections[topic_name], t_ns,
-                         typestore.serialize_cdr(msg, msg.__msgtype__))
+        _write_messages(writer, typestore, messages, typestore.serialize_cdr)
     return path
 
 
 # --- helpers -----------------------------------------------------------------
+
+
+def _write_messages(writer: Any, typestore: Any, messages, serialize) -> None:
+    """Write (t_ns, topic, msg) in order, one connection per topic (ROS1 and ROS2 writers alike)."""
+    connections: dict[str, Any] = {}
+    for t_ns, topic_name, msg in messages:
+        if topic_name not in connections:
+            connections[topic_name] = writer.add_connection(topic_name, msg.__msgtype__, typestore=typestore)
+        writer.write(connections[topic_name], t_ns, serialize(msg, msg.__msgtype__))
 
 
 def _check_lengths(frames: Sequence[np.ndarray], stamps: Sequence[float]) -> None:
