@@ -19,6 +19,15 @@ Beyond the paper (see README "beyond the paper"), in four steps, all on plain ar
 4. One loop per place: of neighbouring accepted pairs (within NMS_RADIUS nodes on both
    sides) only the strongest is kept, so the arc joins the two closest views rather
    than a fan of near-misses that are more than a metre apart.
+5. Long runs (``run_loops``): a stretch driven twice with a lateral offset matches
+   only weakly node by node (near walls are magnified, benchmarks/results/
+   offset_analysis.md), but it does so for many nodes in a row. The descriptor's
+   z-scores and those of a colour histogram of the horizon band (``engine.colour``,
+   parallax-tolerant) are averaged over RUN_LENGTH consecutive pairs along a diagonal;
+   each connected area above ``run_z`` gives one loop at its strongest pair, if the
+   relative yaw along the run says the two passes were parallel (180 degrees apart on
+   an anti-diagonal, 0 on a forward one): a run through a 90-degree crossing is not a
+   stretch driven twice. Places steps 2-3 already closed are left alone.
 
 Descriptors without column signatures (files written before they existed) fall back to
 steps 1, 2 and 4 with a stricter single-pair rule; loops then carry no ``yaw``.
@@ -30,6 +39,8 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+
+from scipy import ndimage
 
 from .calibrate import robust_stats, zscores
 from .params import MapParams
@@ -43,6 +54,9 @@ FORWARD_LAG_FACTOR = 4
 _CANDIDATE_Z = 2.5
 _MAX_CANDIDATES = 20000
 _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
+RUN_LENGTH = 15         # nodes of a long run (step 5); every pair of it must be valid
+COLOUR_WEIGHT = 2.0     # weight of the colour-histogram z-score against the descriptor's
+RUN_YAW_TOLERANCE = 45.0  # degrees: median deviation from parallel allowed along a run
 
 
 @dataclass(frozen=True)
@@ -53,6 +67,7 @@ class VerifiedThresholds:
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
     single_verify_z: float = 3.0  # ... and this verification
     near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
+    run_z: float = 2.25       # long runs: mean combined z over RUN_LENGTH pairs
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()
@@ -206,10 +221,74 @@ def _local_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, radius: in
     return keep
 
 
+def run_means(z: np.ndarray, length: int, sign: int) -> np.ndarray:
+    """Mean of ``z`` over the run (i + k, j + sign * k), |k| <= length // 2, for every (i, j).
+
+    -inf where any pair of the run is outside the matrix or NaN (a temporal neighbour):
+    only whole runs count, so a run is never judged on a few terms at the border.
+    """
+    m = z.shape[0]
+    h = length // 2
+    padded = np.full((m + 2 * h, m + 2 * h), np.nan, np.float32)
+    padded[h:h + m, h:h + m] = z
+    total = np.zeros((m, m), np.float32)
+    for k in range(-h, h + 1):   # the term (i + k, j + sign * k) of every run at once
+        total += padded[h + k:h + k + m, h + sign * k:h + sign * k + m]
+    return np.nan_to_num(total / (2 * h + 1), nan=-np.inf)
+
+
+def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
+              node_shifts: np.ndarray, frame_width: int, exclude: int,
+              th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float]]:
+    """Step 5: one (a, b, run score, yaw) per long run of matching nodes, a < b."""
+    v = np.asarray(node_vectors, np.float32)
+    m = v.shape[0]
+    if m < RUN_LENGTH + exclude + 2:
+        return []
+    z = zscores(v @ v.T, exclude)
+    col = np.asarray(node_colours, np.float32)
+    zc = zscores(col @ col.T, exclude)
+    combined = ((z + COLOUR_WEIGHT * zc) / np.sqrt(1.0 + COLOUR_WEIGHT ** 2)).astype(np.float32)
+    _mask_near(combined, exclude)
+    backward = run_means(combined, RUN_LENGTH, -1)
+    forward = run_means(combined, RUN_LENGTH, 1)
+    lag = np.arange(m)[None, :] - np.arange(m)[:, None]
+    forward[lag <= FORWARD_LAG_FACTOR * exclude] = -np.inf   # see _sequence_scores
+    score = np.maximum(backward, forward)
+    above = np.triu(score >= th.run_z, exclude + 1)
+    labels, count = ndimage.label(above, structure=np.ones((3, 3), bool))
+    if count == 0:
+        return []
+    # The strongest pair of every connected area (ties: the first in row order).
+    flat = np.flatnonzero(labels)
+    order = flat[np.lexsort((-score.ravel()[flat], labels.ravel()[flat]))]
+    firsts = order[np.r_[True, np.diff(labels.ravel()[order]) != 0]]
+    h = RUN_LENGTH // 2
+    k = np.arange(-h, h + 1)
+    cols = np.asarray(node_columns, np.float32)
+    out = []
+    for pos in firsts:
+        a, b = divmod(int(pos), m)
+        sign = -1 if backward[a, b] >= forward[a, b] else 1
+        ra, rb = a + k, b + sign * k
+        _, shift = align_nodes(cols, ra, rb)
+        yaw = pair_yaw(shift, cols.shape[1], node_shifts[ra], node_shifts[rb], frame_width)
+        parallel = 180.0 if sign == -1 else 0.0
+        off = np.abs((yaw - parallel + 180.0) % 360.0 - 180.0)
+        if np.median(off) <= RUN_YAW_TOLERANCE:
+            out.append((a, b, float(score[a, b]), float(yaw[h])))
+    return out
+
+
 def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Optional[np.ndarray] = None,
                    node_shifts: Optional[np.ndarray] = None, frame_width: int = 0,
-                   thresholds: VerifiedThresholds = DEFAULT_THRESHOLDS):
-    """Loop candidates of the ``verified`` method, sorted by (a, b), with yaw where known."""
+                   thresholds: VerifiedThresholds = DEFAULT_THRESHOLDS,
+                   node_colours: Optional[np.ndarray] = None):
+    """Loop candidates of the ``verified`` method, sorted by (a, b), with yaw where known.
+
+    Step 5 (long runs) needs colour histograms, column signatures and the panorama
+    shifts (for the yaw of the run); without them it is skipped.
+    """
     from .loops import LoopCandidate
 
     ps = score_pairs(node_vectors, node_columns, int(params.neighbor_node_num), only_for=thresholds)
@@ -224,5 +303,12 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         score = float(ps.verify[c]) if ps.verify is not None else None
         out.append(LoopCandidate(int(ps.a[c]), int(ps.b[c]), float(ps.cosine[c]), 0,
                                  yaw=None if yaw is None else float(yaw[k]), score=score))
+    if node_colours is not None and node_columns is not None and node_shifts is not None and frame_width > 0:
+        v = np.asarray(node_vectors, np.float32)
+        near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
+        for a, b, strength, run_yaw in run_loops(v, node_colours, node_columns, np.asarray(node_shifts),
+                                                 frame_width, int(params.neighbor_node_num), thresholds):
+            if all(abs(a - lc.a) > near or abs(b - lc.b) > near for lc in out):
+                out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out

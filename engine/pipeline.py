@@ -49,6 +49,7 @@ def describe(
     A descriptors .npz written by ``describe`` is loaded as it is. With ``cache``
     given, a previous result for the same file and settings is reused.
     """
+    from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
     from .verify import COLUMNS_VERSION
 
@@ -62,7 +63,8 @@ def describe(
     key = None
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
-                        {"shift": settings.shift, "columns": COLUMNS_VERSION, **model.settings()})
+                        {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
+                         **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
@@ -89,8 +91,10 @@ def describe_frames(
     in-memory recordings by benchmarks and tests).
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
-    (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks.
+    (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
+    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset.
     """
+    from .colour import colour_histogram
     from .shift import apply_shift, canonical_shift
     from .verify import column_features
 
@@ -100,6 +104,7 @@ def describe_frames(
     indices: list[int] = []
     shifts: list[int] = []
     columns: list[np.ndarray] = []
+    colours: list[np.ndarray] = []
     frame_width: list[int] = []
 
     def shifted_images() -> Iterator[np.ndarray]:
@@ -111,6 +116,7 @@ def describe_frames(
             shifts.append(s)
             rgb = apply_shift(frame.rgb, s) if s else frame.rgb
             columns.append(column_features(rgb))
+            colours.append(colour_histogram(rgb))
             if not frame_width:
                 frame_width.append(int(frame.rgb.shape[1]))
             yield rgb
@@ -135,6 +141,7 @@ def describe_frames(
         vectors=np.asarray(vectors, np.float32),
         meta=meta,
         columns=np.stack(columns).astype(np.float16) if columns else None,
+        colours=np.stack(colours).astype(np.float16) if colours else None,
     )
 
 
@@ -168,8 +175,9 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         from .loops_verified import verified_loops
 
         columns = None if descs.columns is None else descs.columns[node_rows]
+        colours = None if descs.colours is None else descs.colours[node_rows]
         loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
-                               int(descs.meta.get("frame_width", 0)))
+                               int(descs.meta.get("frame_width", 0)), node_colours=colours)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}

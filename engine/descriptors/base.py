@@ -6,6 +6,9 @@ The .npz contract (DESIGN.md): ``stamps`` float64 (n,), ``frames`` int64 (n,),
 Added key (optional): ``columns`` float16 (n, W', F), per-column signatures of the
 shifted frames for yaw-aligned verification (``engine.verify``). Files without it
 still load (``columns`` is then None).
+Added key (optional): ``colours`` float16 (n, 512), the colour histogram of each frame's
+horizon band (``engine.colour``), evidence of the ``verified`` method for revisits with a
+lateral offset. Files without it still load (``colours`` is then None).
 """
 
 from __future__ import annotations
@@ -30,13 +33,15 @@ class Descriptors:
     vectors: np.ndarray   # float32 (n, d), rows L2-normalised
     meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
     columns: Optional[np.ndarray] = None  # float16 (n, W', F) column signatures, when computed
+    colours: Optional[np.ndarray] = None  # float16 (n, 512) horizon-band colour histograms, when computed
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
 
     def optional_arrays(self) -> dict:
         """The added, optional .npz keys that are set (for writers of the file)."""
-        return {} if self.columns is None else {"columns": np.asarray(self.columns, np.float16)}
+        extra = {"columns": self.columns, "colours": self.colours}
+        return {k: np.asarray(v, np.float16) for k, v in extra.items() if v is not None}
 
     def save(self, path: str | Path, vector_dtype=np.float32) -> None:
         """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
@@ -69,6 +74,7 @@ class Descriptors:
                     vectors=z["descriptors"].astype(np.float32),
                     meta=json.loads(str(z["meta"])),
                     columns=z["columns"].astype(np.float16) if "columns" in z.files else None,
+                    colours=z["colours"].astype(np.float16) if "colours" in z.files else None,
                 )
         except InputError:
             raise
@@ -81,6 +87,8 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has inconsistent array lengths")
         if d.columns is not None and (d.columns.ndim != 3 or d.columns.shape[0] != n):
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
+        if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape[0] != n):
+            raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
         return d
 
 

@@ -1,0 +1,54 @@
+"""Step 5 of ``verified``: long runs close a stretch driven back with a lateral offset."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from engine.benchmark import Case, describe_case
+from engine.evaluate import evaluate
+from engine.loops_verified import RUN_LENGTH, run_means
+from engine.params import MapParams
+from engine.pipeline import build_map
+
+
+def test_run_means_average_whole_runs_along_either_diagonal():
+    rng = np.random.default_rng(0)
+    m, h = 40, RUN_LENGTH // 2
+    z = rng.normal(size=(m, m)).astype(np.float32)
+    back = run_means(z, RUN_LENGTH, -1)
+    fwd = run_means(z, RUN_LENGTH, 1)
+    i, j = 12, 25
+    k = np.arange(-h, h + 1)
+    assert back[i, j] == pytest.approx(z[i + k, j - k].mean(), abs=1e-5)
+    assert fwd[i, j] == pytest.approx(z[i + k, j + k].mean(), abs=1e-5)
+    # A run that leaves the matrix or touches a NaN (temporal neighbour) is not scored.
+    assert back[h - 1, 20] == -np.inf and fwd[20, m - h] == -np.inf
+    z[i + 2, j - 2] = np.nan
+    assert run_means(z, RUN_LENGTH, -1)[i, j] == -np.inf
+    assert np.isfinite(run_means(z, RUN_LENGTH, 1)[i, j])
+
+
+@pytest.fixture(scope="module")
+def offset_indoor():
+    # Seed 31 of the benchmark: its offset return is found by the long-run step only.
+    return describe_case(Case("offset", "indoor", seed=31), shifts=(True,), input_height=128)
+
+
+def test_offset_return_is_closed_by_a_long_run_and_nothing_else_is(offset_indoor):
+    descs = offset_indoor.by_shift[True]
+    assert descs.colours is not None and descs.colours.shape == (len(descs), 512)
+    topomap = build_map(descs, MapParams())
+    ev = evaluate(topomap, offset_indoor.poses, neighbor_node_num=5)
+    assert ev.fp == 0
+    assert ev.events_total == 1 and ev.events_found == 1
+    # The return is driven the other way: the loop's yaw says so.
+    (yaw,) = [d["yaw"] for _, _, d in topomap.loops() if "yaw" in d][:1]
+    assert abs(abs(yaw) - 180.0) < 30.0
+
+
+def test_without_colour_histograms_the_offset_return_stays_open(offset_indoor):
+    """Files written before colour histograms existed map as before (step 5 skipped)."""
+    descs = replace(offset_indoor.by_shift[True], colours=None)
+    ev = evaluate(build_map(descs, MapParams()), offset_indoor.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == 0
