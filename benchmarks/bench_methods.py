@@ -106,8 +106,8 @@ def speed_line(rows: list[Row]) -> str:
 def build_map_speed(cases=((1000, 256), (3000, 256), (1000, 17920), (3000, 17920)), repeats: int = 3) -> str:
     """Seconds per build_map (cached descriptors -> map) for ``verified`` and ``ours``.
 
-    Descriptors are a random walk (neighbours alike, every row a node) with random
-    column signatures: a worst case for the number of candidate pairs. ``cases`` are
+    Descriptors and colour histograms are random walks (neighbours alike, every row a
+    node) with random column signatures: a worst case for the number of candidate pairs. ``cases`` are
     (nodes, descriptor length); 17920 is effnet-vlad's "sectors" layout, whose
     node-by-node similarity product alone takes most of the time at 3000 nodes.
     """
@@ -123,8 +123,10 @@ def build_map_speed(cases=((1000, 256), (3000, 256), (1000, 17920), (3000, 17920
         v += rng.normal(size=(n, dim)).astype(np.float32)
         v /= np.linalg.norm(v, axis=1, keepdims=True)
         cols = rng.normal(size=(n, 128, 32)).astype(np.float16)
+        colours = np.abs(np.cumsum(rng.normal(size=(n, 512)), axis=0) * 0.05 + rng.normal(size=(n, 512)))
+        colours = (colours / np.linalg.norm(colours, axis=1, keepdims=True)).astype(np.float16)
         d = Descriptors(np.arange(n, dtype=float), np.arange(n), np.zeros(n, np.int64), v,
-                        {"shift": True, "descriptor": "effnet-vlad", "frame_width": 256}, cols)
+                        {"shift": True, "descriptor": "effnet-vlad", "frame_width": 256}, cols, colours)
         times = {"ours": float("nan")}
         # ours gathers both vectors of every candidate pair (engine/loops.py): at 17920
         # dimensions that is tens of GB, so it is timed on the short descriptor only.
