@@ -1,6 +1,6 @@
 """The ``verified`` loop method: calibrated scores, sequence support, yaw-aligned verification.
 
-Beyond the paper (see README "beyond the paper"), in four steps, all on plain arrays:
+Beyond the paper (see README "beyond the paper"), in five steps, all on plain arrays:
 
 1. Calibration (``engine.calibrate``): cosine similarities become z-scores against each
    node's own background of distant nodes, so thresholds mean the same for any
