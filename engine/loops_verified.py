@@ -23,11 +23,15 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    only weakly node by node (near walls are magnified, benchmarks/results/
    offset_analysis.md), but it does so for many nodes in a row. The descriptor's
    z-scores and those of a colour histogram of the horizon band (``engine.colour``,
-   parallax-tolerant) are averaged over RUN_LENGTH consecutive pairs along a diagonal;
-   each connected area above ``run_z`` gives one loop at its strongest pair, if the
-   relative yaw along the run says the two passes were parallel (180 degrees apart on
-   an anti-diagonal, 0 on a forward one): a run through a 90-degree crossing is not a
-   stretch driven twice. Places steps 2-3 already closed are left alone.
+   parallax-tolerant) are averaged over RUN_LENGTH consecutive pairs along a diagonal,
+   and measured in standard deviations of the recording's own run scores. Each
+   connected area above ``run_z`` (backward) or ``run_forward_z`` (forward) gives one
+   loop: at its strongest pair, moved to whichever of the three parallel diagonals has
+   the higher mean over twice the run (one node off is more than a metre away), and
+   kept only if the relative yaw along the run says the two passes were parallel (180
+   degrees apart backward, 0 forward): a run through a 90-degree crossing is not a
+   stretch driven twice. One loop per stretch: none where steps 2-4 or another run
+   already closed the place or the same diagonal line.
 
 Descriptors without column signatures (files written before they existed) fall back to
 steps 1, 2 and 4 with a stricter single-pair rule; loops then carry no ``yaw``.
@@ -57,6 +61,7 @@ _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
 RUN_LENGTH = 15         # nodes of a long run (step 5); every pair of it must be valid
 COLOUR_WEIGHT = 2.0     # weight of the colour-histogram z-score against the descriptor's
 RUN_YAW_TOLERANCE = 45.0  # degrees: median deviation from parallel allowed along a run
+SAME_LINE = 2           # runs within this many diagonals of a loop are the same stretch
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,8 @@ class VerifiedThresholds:
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
     single_verify_z: float = 3.0  # ... and this verification
     near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
-    run_z: float = 2.25       # long runs: mean combined z over RUN_LENGTH pairs
+    run_z: float = 3.4        # long runs driven the other way (std. dev. of the recording's run scores)
+    run_forward_z: float = 4.6  # ... and the same way (streets driven alike resemble each other)
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()
@@ -237,10 +243,27 @@ def run_means(z: np.ndarray, length: int, sign: int) -> np.ndarray:
     return np.nan_to_num(total / (2 * h + 1), nan=-np.inf)
 
 
+def _diagonal_means(z: np.ndarray, a: int, b: int, sign: int, half: int) -> list[float]:
+    """Mean of ``z`` along the diagonal through (a, b + db), db = -1, 0, 1, over |k| <= half."""
+    m = z.shape[0]
+    k = np.arange(-half, half + 1)
+    means = []
+    for db in (-1, 0, 1):
+        ii, jj = a + k, b + db + sign * k
+        inside = (ii >= 0) & (ii < m) & (jj >= 0) & (jj < m)
+        vals = z[ii[inside], jj[inside]]
+        vals = vals[np.isfinite(vals)]
+        means.append(float(vals.mean()) if vals.size else -np.inf)
+    return means
+
+
 def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
               node_shifts: np.ndarray, frame_width: int, exclude: int,
-              th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float]]:
-    """Step 5: one (a, b, run score, yaw) per long run of matching nodes, a < b."""
+              th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float, int]]:
+    """Step 5: one (a, b, run score, yaw, direction) per long run of matching nodes, a < b.
+
+    direction is -1 for a backward run (driven the other way), +1 for a forward one.
+    """
     v = np.asarray(node_vectors, np.float32)
     m = v.shape[0]
     if m < RUN_LENGTH + exclude + 2:
@@ -255,7 +278,14 @@ def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: 
     lag = np.arange(m)[None, :] - np.arange(m)[:, None]
     forward[lag <= FORWARD_LAG_FACTOR * exclude] = -np.inf   # see _sequence_scores
     score = np.maximum(backward, forward)
-    above = np.triu(score >= th.run_z, exclude + 1)
+    valid = np.isfinite(score) & (lag > exclude)
+    if np.count_nonzero(valid) < 10:
+        return []
+    # Run scores of a recording spread more where its views are alike all along (long
+    # streets): thresholds are in standard deviations of the recording's own run scores.
+    mu, sd = robust_stats(score[valid].astype(np.float64))
+    is_back = backward >= forward
+    above = valid & np.where(is_back, backward >= mu + th.run_z * sd, forward >= mu + th.run_forward_z * sd)
     labels, count = ndimage.label(above, structure=np.ones((3, 3), bool))
     if count == 0:
         return []
@@ -269,15 +299,34 @@ def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: 
     out = []
     for pos in firsts:
         a, b = divmod(int(pos), m)
-        sign = -1 if backward[a, b] >= forward[a, b] else 1
+        sign = -1 if is_back[a, b] else 1
+        # Which of three parallel diagonals is the stretch itself: one node off is more
+        # than a metre away after a sideways offset, and a longer mean decides better.
+        b += int(np.argmax(_diagonal_means(combined, a, b, sign, RUN_LENGTH))) - 1
+        if b <= a + exclude or b >= m:
+            continue
         ra, rb = a + k, b + sign * k
+        inside = (ra < m) & (rb >= 0) & (rb < m)
+        ra, rb = ra[inside], rb[inside]
         _, shift = align_nodes(cols, ra, rb)
         yaw = pair_yaw(shift, cols.shape[1], node_shifts[ra], node_shifts[rb], frame_width)
         parallel = 180.0 if sign == -1 else 0.0
         off = np.abs((yaw - parallel + 180.0) % 360.0 - 180.0)
         if np.median(off) <= RUN_YAW_TOLERANCE:
-            out.append((a, b, float(score[a, b]), float(yaw[h])))
+            agree = np.radians(yaw[off <= RUN_YAW_TOLERANCE])   # circular mean of the agreeing pairs
+            run_yaw = float(np.degrees(np.arctan2(np.sin(agree).mean(), np.cos(agree).mean())))
+            out.append((a, b, float(score[a, b]), run_yaw, sign))
     return out
+
+
+def _same_stretch(a: int, b: int, sign: int, other, near: int) -> bool:
+    """Whether loop ``other`` closes the same place or the same stretch as run (a, b)."""
+    if abs(a - other.a) <= near and abs(b - other.b) <= near:
+        return True
+    # Same diagonal line: the same stretch driven twice, seen at another point along it.
+    if sign == -1:
+        return abs((a + b) - (other.a + other.b)) <= SAME_LINE
+    return abs((b - a) - (other.b - other.a)) <= SAME_LINE
 
 
 def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Optional[np.ndarray] = None,
@@ -306,9 +355,9 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     if node_colours is not None and node_columns is not None and node_shifts is not None and frame_width > 0:
         v = np.asarray(node_vectors, np.float32)
         near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
-        for a, b, strength, run_yaw in run_loops(v, node_colours, node_columns, np.asarray(node_shifts),
-                                                 frame_width, int(params.neighbor_node_num), thresholds):
-            if all(abs(a - lc.a) > near or abs(b - lc.b) > near for lc in out):
+        for a, b, strength, run_yaw, sign in run_loops(v, node_colours, node_columns, np.asarray(node_shifts),
+                                                       frame_width, int(params.neighbor_node_num), thresholds):
+            if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out

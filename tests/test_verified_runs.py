@@ -42,6 +42,7 @@ def test_offset_return_is_closed_by_a_long_run_and_nothing_else_is(offset_indoor
     ev = evaluate(topomap, offset_indoor.poses, neighbor_node_num=5)
     assert ev.fp == 0
     assert ev.events_total == 1 and ev.events_found == 1
+    assert len(topomap.loops()) == 1        # one loop for the one stretch driven twice
     # The return is driven the other way: the loop's yaw says so.
     (yaw,) = [d["yaw"] for _, _, d in topomap.loops() if "yaw" in d][:1]
     assert abs(abs(yaw) - 180.0) < 30.0
