@@ -600,7 +600,7 @@ class MainWindow(QMainWindow):
                 self.warn(str(exc))
         self.doc.replace_map(topomap, result.descs, decisions)
         self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
-        self.params_panel.set_params(self.doc.params, self._defaults)
+        self.params_panel.set_params(self.doc.params, self._used_defaults())
         self._restore_view()
         self.statusBar().showMessage(
             f"Map built in {result.seconds:.1f} s: {self.doc.node_count()} nodes, "
@@ -626,6 +626,17 @@ class MainWindow(QMainWindow):
         for w in (self.progress_bar, self.eta_label, self.cancel_button):
             w.setVisible(on)
         self.cancel_button.setEnabled(on)
+
+    def _used_defaults(self) -> dict:
+        """What an unset threshold stands for in the current map: the value it was built with
+        (``verified`` calibrates its node threshold from the recording), else the descriptor's."""
+        shown = dict(self._defaults)
+        topomap = self.doc.topomap
+        if topomap is not None and topomap.meta.get("method") == self.doc.params.method:
+            for name in ("node_sim_th", "loop_sim_th"):
+                if isinstance(topomap.meta.get(name), (int, float)):
+                    shown[name] = float(topomap.meta[name])
+        return shown
 
     def _set_known_shifts(self, descs) -> None:
         self.frames.known_shifts = ({int(f): int(s) for f, s in zip(descs.frames, descs.shifts)}
@@ -661,6 +672,7 @@ class MainWindow(QMainWindow):
             self.warn(str(exc))
             return
         self.doc.replace_map(topomap, decisions=decisions)
+        self.params_panel.set_params(new, self._used_defaults())
         self.statusBar().showMessage(
             f"{self.doc.node_count()} nodes, {len(self.doc.topomap.loops())} loops with the new parameters", 5000)
         self.mapReady.emit()

@@ -59,7 +59,8 @@ class ParamsPanel(QWidget):
             self.method.addItem(m, m)
             self.method.setItemData(self.method.count() - 1, METHOD_TIPS.get(m, m), 3)
         self.method.setToolTip("Loop detection method (Table I of the paper)")
-        self.node_sim_th = _double(0.0, 1.0, 0.01, "Similarity above which a frame is merged into the current node")
+        self.node_sim_th = _double(0.0, 1.0, 0.01, "Similarity above which a frame is merged into the current node "
+                                                   "(verified: calibrated from the recording unless you change it)")
         self.loop_sim_th = _double(-1.0, 1.0, 0.01, "Similarity above which two nodes may be the same place")
         self.window_size = _int(1, 100, "Nodes per sliding window of the spatial consistency check")
         self.count_th = _int(0, 100, "A window is a candidate when more than this many of its nodes match")

@@ -200,6 +200,19 @@ def test_parameter_change_rebuilds_at_once_and_keeps_decisions(qtbot, make_windo
     assert statuses(w)[key] == "auto"
 
 
+def test_verified_shows_the_node_threshold_it_calibrated(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("verified"))
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    assert w.doc.params.node_sim_th is None              # left unset: calibrated per recording
+    used = w.doc.topomap.meta["node_sim_th"]
+    assert used != pytest.approx(w._defaults["node_sim_th"], abs=1e-3)
+    assert w.params_panel.node_sim_th.value() == pytest.approx(used, abs=1e-3)
+    with qtbot.waitSignal(w.mapReady, timeout=5000):   # another parameter: still the calibrated value
+        w.params_panel.neighbor_node_num.setValue(w.params_panel.neighbor_node_num.value() + 1)
+    assert w.params_panel.node_sim_th.value() == pytest.approx(w.doc.topomap.meta["node_sim_th"], abs=1e-3)
+
+
 def test_switching_to_simple_describes_again_and_keeps_decisions(qtbot, make_window, recording, tmp_path):
     w = make_window()
     open_and_run(qtbot, w, copy_recording(recording, tmp_path))
