@@ -84,6 +84,7 @@ def _map_params(args: argparse.Namespace) -> MapParams:
     return MapParams(
         method=args.method, node_sim_th=args.node_sim_th, loop_sim_th=args.loop_sim_th,
         window_size=args.window_size, count_th=args.count_th, neighbor_node_num=args.neighbor_node_num,
+        long_runs=args.long_runs,
     )
 
 
@@ -250,6 +251,9 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--window-size", type=int, default=5)
     p.add_argument("--count-th", type=int, default=2)
     p.add_argument("--neighbor-node-num", type=int, default=MapParams().neighbor_node_num)
+    p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
+                   help="verified: skip the long-run step that finds returns with a lateral offset "
+                        "(fewer loops found, fewer false ones)")
     p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
     p.add_argument("--plot", help="also write a PNG of the map")

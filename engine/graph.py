@@ -44,7 +44,7 @@ _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int}
 _GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
                 "node_sim_th": float, "loop_sim_th": float, "window_size": int,
-                "count_th": int, "neighbor_node_num": int, "interval": float}
+                "count_th": int, "neighbor_node_num": int, "interval": float, "long_runs": int}
 
 
 def _plain(value, kind=None):

@@ -352,7 +352,8 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         score = float(ps.verify[c]) if ps.verify is not None else None
         out.append(LoopCandidate(int(ps.a[c]), int(ps.b[c]), float(ps.cosine[c]), 0,
                                  yaw=None if yaw is None else float(yaw[k]), score=score))
-    if node_colours is not None and node_columns is not None and node_shifts is not None and frame_width > 0:
+    if (params.long_runs and node_colours is not None and node_columns is not None
+            and node_shifts is not None and frame_width > 0):
         v = np.asarray(node_vectors, np.float32)
         near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
         for a, b, strength, run_yaw, sign in run_loops(v, node_colours, node_columns, np.asarray(node_shifts),

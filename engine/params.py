@@ -11,6 +11,8 @@ SHIFTED_METHODS = ("shift-simple", "ours", "verified")
 # "verified" (beyond the paper, engine.loops_verified): thresholds calibrated from the
 # recording itself, sequence support, yaw-aligned verification; loop_sim_th, window_size
 # and count_th are not used by it, and node_sim_th None means "calibrate from the recording".
+# long_runs is read by "verified" only: off trades the returns with a lateral offset it finds
+# for the rare false loop it adds (README results).
 METHOD_DESCRIPTIONS = {
     "simple": "Simple threshold: any pair with similarity >= loop_sim_th (no panorama shift)",
     "shift-simple": "Panorama shift + simple threshold",
@@ -27,6 +29,7 @@ class MapParams:
     window_size: int = 5
     count_th: int = 2
     neighbor_node_num: int = 5
+    long_runs: bool = True                # verified: step 5, long runs (returns with a lateral offset)
 
     def resolved(self, defaults: dict) -> "MapParams":
         """Fill every None from a descriptor's ``defaults``."""

@@ -11,7 +11,7 @@ from dataclasses import replace
 from typing import Optional
 
 from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout,
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout,
                                QPushButton, QSpinBox, QVBoxLayout, QWidget)
 
 from engine import params as params_module
@@ -65,10 +65,14 @@ class ParamsPanel(QWidget):
         self.window_size = _int(1, 100, "Nodes per sliding window of the spatial consistency check")
         self.count_th = _int(0, 100, "A window is a candidate when more than this many of its nodes match")
         self.neighbor_node_num = _int(0, 1000, "Temporal neighbours of the query that windows must avoid")
+        self.long_runs = QCheckBox("Long runs")
+        self.long_runs.setToolTip("verified: also look for stretches driven twice with a lateral offset "
+                                  "(finds more returns, rarely a false loop)")
 
         self.method.currentIndexChanged.connect(lambda _: self._edited("method"))
         for name in ("node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"):
             getattr(self, name).valueChanged.connect(lambda _, n=name: self._edited(n))
+        self.long_runs.toggled.connect(lambda _: self._edited("long_runs"))
 
         describe_box = QGroupBox("Descriptors")
         form = QFormLayout(describe_box)
@@ -86,6 +90,7 @@ class ParamsPanel(QWidget):
         form.addRow("Window size", self.window_size)
         form.addRow("Count threshold", self.count_th)
         form.addRow("Neighbour nodes", self.neighbor_node_num)
+        form.addRow("", self.long_runs)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(describe_box)
@@ -111,6 +116,7 @@ class ParamsPanel(QWidget):
             self.window_size.setValue(int(shown.window_size))
             self.count_th.setValue(int(shown.count_th))
             self.neighbor_node_num.setValue(int(shown.neighbor_node_num))
+            self.long_runs.setChecked(bool(shown.long_runs))
         finally:
             self._updating = False
         self._params = params
@@ -138,7 +144,12 @@ class ParamsPanel(QWidget):
     def _edited(self, field: str) -> None:
         if self._updating:
             return
-        value = self.method.currentData() if field == "method" else getattr(self, field).value()
+        if field == "method":
+            value = self.method.currentData()
+        elif field == "long_runs":
+            value = self.long_runs.isChecked()
+        else:
+            value = getattr(self, field).value()
         self._params = replace(self._params, **{field: value})
         self._enable_for_method()
         self.paramsEdited.emit(field, self._params)
@@ -150,7 +161,7 @@ class ParamsPanel(QWidget):
     def _enable_for_method(self) -> None:
         """Only the parameters the chosen method reads can be edited."""
         used = PARAMS_USED.get(self.method.currentData(), set(PARAMS_USED["ours"]))
-        for name in PARAMS_USED["ours"]:
+        for name in set().union(*PARAMS_USED.values()):
             getattr(self, name).setEnabled(name in used)
 
 
@@ -160,7 +171,7 @@ PARAMS_USED = {
     "simple": {"node_sim_th", "loop_sim_th"},
     "shift-simple": {"node_sim_th", "loop_sim_th"},
     "ours": {"node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"},
-    "verified": {"node_sim_th", "neighbor_node_num"},
+    "verified": {"node_sim_th", "neighbor_node_num", "long_runs"},
 }
 
 

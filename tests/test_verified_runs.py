@@ -53,3 +53,20 @@ def test_without_colour_histograms_the_offset_return_stays_open(offset_indoor):
     descs = replace(offset_indoor.by_shift[True], colours=None)
     ev = evaluate(build_map(descs, MapParams()), offset_indoor.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == 0
+
+
+def test_long_runs_can_be_switched_off_from_the_cli(offset_indoor, tmp_path):
+    import igraph
+
+    from engine.cli import main
+
+    npz = tmp_path / "offset.npz"
+    offset_indoor.by_shift[True].save(npz)
+    loops = {}
+    for flag in ([], ["--no-long-runs"]):
+        out = tmp_path / f"map{len(flag)}.graphml"
+        assert main(["map", str(npz), "-o", str(out), *flag]) == 0
+        g = igraph.Graph.Read_GraphML(str(out))
+        loops[bool(flag)] = sum(1 for e in g.es if e["kind"] == "loop")
+        assert int(g["long_runs"]) == (0 if flag else 1)
+    assert loops == {False: 1, True: 0}
