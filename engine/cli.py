@@ -113,6 +113,13 @@ def cmd_map(args: argparse.Namespace) -> int:
 
     params = _map_params(args)
     descs = _describe(args, shift=params.uses_shift)
+    if args.auto_thresholds:   # thresholds the user did not set: calibrated from this recording
+        from dataclasses import replace
+
+        from .calibrate import paper_thresholds
+
+        found = paper_thresholds(descs.vectors, params.neighbor_node_num)
+        params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
     topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
     poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
     if poses is not None:
@@ -251,6 +258,9 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--window-size", type=int, default=5)
     p.add_argument("--count-th", type=int, default=2)
     p.add_argument("--neighbor-node-num", type=int, default=MapParams().neighbor_node_num)
+    p.add_argument("--auto-thresholds", action="store_true",
+                   help="simple / shift-simple / ours: calibrate the node and loop thresholds not given "
+                        "from the recording itself (as the benchmark does) instead of the descriptor's")
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
                    help="verified: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
@@ -280,6 +281,7 @@ class MainWindow(QMainWindow):
         self.pair_view.addManual.connect(self.add_manual_loop)
         self.pair_view.removeManual.connect(self.remove_manual_loop)
         self.params_panel.paramsEdited.connect(self._params_edited)
+        self.params_panel.calibrateRequested.connect(self.calibrate_thresholds)
         self.params_panel.runRequested.connect(self.start_run)
         self.params_panel.describeEdited.connect(
             lambda: self.statusBar().showMessage("Descriptor settings changed: press Run (F5) to describe again", 8000))
@@ -648,6 +650,18 @@ class MainWindow(QMainWindow):
         if new == old:
             return
         self.undo_stack.push(commands.ChangeParams(self._apply_params, old, new, field))
+
+    def calibrate_thresholds(self) -> None:
+        """Node and loop thresholds of the paper's methods from this recording (one undo step)."""
+        from engine.calibrate import paper_thresholds
+
+        if self.doc.descs is None:
+            self.statusBar().showMessage("Run the recording first: thresholds come from its descriptors", 5000)
+            return
+        old = self.doc.params
+        new = replace(old, **paper_thresholds(self.doc.descs.vectors, old.neighbor_node_num))
+        if new != old:
+            self.undo_stack.push(commands.ChangeParams(self._apply_params, old, new, "thresholds"))
 
     def _apply_params(self, _old: MapParams, new: MapParams) -> None:
         """Rebuild the map with ``new`` (undo/redo and the panel both land here)."""

@@ -28,6 +28,7 @@ class ParamsPanel(QWidget):
     paramsEdited = Signal(str, object)   # field name, new MapParams
     describeEdited = Signal()
     runRequested = Signal()
+    calibrateRequested = Signal()        # thresholds of the paper's methods from the recording
 
     def __init__(self, parent: Optional[QWidget] = None) -> None:
         super().__init__(parent)
@@ -65,6 +66,10 @@ class ParamsPanel(QWidget):
         self.window_size = _int(1, 100, "Nodes per sliding window of the spatial consistency check")
         self.count_th = _int(0, 100, "A window is a candidate when more than this many of its nodes match")
         self.neighbor_node_num = _int(0, 1000, "Temporal neighbours of the query that windows must avoid")
+        self.calibrate_button = QPushButton("Thresholds from recording")
+        self.calibrate_button.setToolTip("simple / shift-simple / ours: set the node and loop thresholds "
+                                         "from this recording's own similarities (undoable)")
+        self.calibrate_button.clicked.connect(self.calibrateRequested)
         self.long_runs = QCheckBox("Long runs")
         self.long_runs.setToolTip("verified: also look for stretches driven twice with a lateral offset "
                                   "(finds more returns, rarely a false loop)")
@@ -91,6 +96,7 @@ class ParamsPanel(QWidget):
         form.addRow("Count threshold", self.count_th)
         form.addRow("Neighbour nodes", self.neighbor_node_num)
         form.addRow("", self.long_runs)
+        form.addRow("", self.calibrate_button)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(describe_box)
@@ -163,6 +169,7 @@ class ParamsPanel(QWidget):
         used = PARAMS_USED.get(self.method.currentData(), set(PARAMS_USED["ours"]))
         for name in set().union(*PARAMS_USED.values()):
             getattr(self, name).setEnabled(name in used)
+        self.calibrate_button.setEnabled("loop_sim_th" in used)
 
 
 # Which map parameters each method reads (engine/loops.py, engine/loops_verified.py):

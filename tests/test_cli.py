@@ -101,6 +101,26 @@ def test_describe_then_map_from_npz_gives_the_same_map(recording, tmp_path, cach
     assert sorted(map(sorted, ga.edges)) == sorted(map(sorted, gb.edges))
 
 
+def test_auto_thresholds_calibrate_what_the_user_left_unset(recording, tmp_path, cache_dir, capsys):
+    from engine.calibrate import paper_thresholds
+    from engine.descriptors.base import Descriptors
+
+    _, files = recording
+    npz = tmp_path / "d.npz"
+    assert run_cli(capsys, "describe", files["video"], "-o", npz, *FAST, *cache_dir)[0] == 0
+    expected = paper_thresholds(Descriptors.load(npz).vectors, 5)
+    auto, mixed = tmp_path / "auto.graphml", tmp_path / "mixed.graphml"
+    assert run_cli(capsys, "map", npz, "-o", auto, "--method", "ours", "--auto-thresholds", "-q")[0] == 0
+    assert run_cli(capsys, "map", npz, "-o", mixed, "--method", "ours", "--auto-thresholds",
+                   "--loop-sim-th", "0.91", "-q")[0] == 0
+    g = igraph.Graph.Read_GraphML(str(auto))
+    assert g["node_sim_th"] == pytest.approx(expected["node_sim_th"], abs=1e-6)
+    assert g["loop_sim_th"] == pytest.approx(expected["loop_sim_th"], abs=1e-6)
+    g = igraph.Graph.Read_GraphML(str(mixed))
+    assert g["loop_sim_th"] == pytest.approx(0.91)            # given by the user: kept
+    assert g["node_sim_th"] == pytest.approx(expected["node_sim_th"], abs=1e-6)
+
+
 def test_no_shift_descriptors_have_zero_shifts(recording, tmp_path, cache_dir, capsys):
     _, files = recording
     npz = tmp_path / "d.npz"

@@ -213,6 +213,26 @@ def test_verified_shows_the_node_threshold_it_calibrated(qtbot, make_window, rec
     assert w.params_panel.node_sim_th.value() == pytest.approx(w.doc.topomap.meta["node_sim_th"], abs=1e-3)
 
 
+def test_thresholds_from_the_recording_are_one_undo_step(qtbot, make_window, recording, tmp_path):
+    from engine.calibrate import paper_thresholds
+
+    w = make_window()                                    # shift-simple: a paper method
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    before = w.doc.params
+    expected = paper_thresholds(w.doc.descs.vectors, before.neighbor_node_num)
+    assert w.params_panel.calibrate_button.isEnabled()
+    with qtbot.waitSignal(w.mapReady, timeout=5000):
+        qtbot.mouseClick(w.params_panel.calibrate_button, Qt.LeftButton)
+    assert w.doc.params.loop_sim_th == pytest.approx(expected["loop_sim_th"])
+    assert w.doc.params.node_sim_th == pytest.approx(expected["node_sim_th"])
+    assert w.params_panel.loop_sim_th.value() == pytest.approx(expected["loop_sim_th"], abs=1e-3)
+    assert w.doc.topomap.meta["loop_sim_th"] == pytest.approx(expected["loop_sim_th"])
+    w.undo_stack.undo()
+    assert w.doc.params == before
+    w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("verified"))
+    assert not w.params_panel.calibrate_button.isEnabled()   # verified calibrates by itself
+
+
 def test_switching_to_simple_describes_again_and_keeps_decisions(qtbot, make_window, recording, tmp_path):
     w = make_window()
     open_and_run(qtbot, w, copy_recording(recording, tmp_path))
