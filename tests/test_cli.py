@@ -191,3 +191,14 @@ def test_real_process_exit_status_and_no_traceback(tmp_path):
                           "-o", str(tmp_path / "x.graphml")], capture_output=True, text=True, timeout=120)
     assert out.returncode == 2
     assert out.stderr.strip().count("\n") == 0 and "no such file" in out.stderr.lower()
+
+
+def test_a_broken_video_gives_only_our_line_on_stderr(tmp_path):
+    """Not even FFmpeg's own complaint about the container precedes our message."""
+    bad = tmp_path / "broken.mp4"
+    bad.write_bytes(b"\x00\x00\x00\x18ftypisom" + bytes(3000))
+    out = subprocess.run([sys.executable, "-m", "engine", "map", str(bad), "-o", str(tmp_path / "x.graphml")],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("panotopo: error:") and "broken.mp4" in lines[0]

@@ -11,6 +11,7 @@ frames in a single forward pass with the same rule as
 
 from __future__ import annotations
 
+import os
 import threading
 from pathlib import Path
 from typing import Iterator, Optional
@@ -20,6 +21,10 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, FrameSource, check_equirectangular
+
+# FFmpeg prints its own line for a broken file ("moov atom not found") before our one-line
+# error; keep it quiet (read when the first video is opened; set the variable to override).
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm", ".mpg", ".mpeg",
                   ".wmv", ".flv", ".ts", ".mts", ".3gp", ".ogv")
