@@ -434,6 +434,39 @@ def test_bag_with_topic_and_pose_topic(qtbot, make_window, recording, tmp_path):
     assert w.doc.node_count() > 0
 
 
+def _answer_topic_dialog(qtbot, choose_pose: bool, accept: bool) -> None:
+    """When the modal bag dialog shows, pick the pose choice and press Open (or Cancel)."""
+    from PySide6.QtCore import QTimer
+    from PySide6.QtWidgets import QApplication, QDialogButtonBox
+
+    from gui.open_dialog import BagTopicDialog
+
+    def answer():
+        dialog = QApplication.activeModalWidget()
+        if not isinstance(dialog, BagTopicDialog):
+            QTimer.singleShot(50, answer)
+            return
+        dialog.pose_topic.setCurrentIndex(1 if choose_pose else 0)
+        box = dialog.findChild(QDialogButtonBox)
+        button = box.button(QDialogButtonBox.Open if accept else QDialogButtonBox.Cancel)
+        qtbot.mouseClick(button, Qt.LeftButton)
+
+    QTimer.singleShot(50, answer)
+
+
+def test_bag_topic_dialog_clicked_through(qtbot, make_window, recording):
+    w = make_window()
+    assert w.interactive
+    _answer_topic_dialog(qtbot, choose_pose=False, accept=False)     # Cancel: nothing opens
+    assert w.open_path(str(recording["ros1"])) is False
+    assert w.doc.descs is None
+    _answer_topic_dialog(qtbot, choose_pose=True, accept=True)       # Open with the pose topic
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        assert w.open_path(str(recording["ros1"]))
+    assert w.doc.node_count() > 0
+    assert w.doc.poses is not None and w.doc.poses_topic
+
+
 def test_recent_files_and_frame_keys(qtbot, make_window, recording, tmp_path):
     video = copy_recording(recording, tmp_path)
     w = make_window()
