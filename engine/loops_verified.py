@@ -15,7 +15,10 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    z-score against distant pairs, must agree. The best shift is the loop's ``yaw``.
    A crossing at 90 degrees has no sequence support (the two passes share one point),
    so a single pair is accepted there only when both its own z-score and its
-   verification are high: verification stands in for the window count.
+   verification are high: verification stands in for the window count. People
+   walking through a crossing can spoil the alignment, so a lone pair is also accepted
+   without it when its z-score is far above the recording's own best unrelated
+   matches (``lone_tail_ratio`` times the 99.9th percentile of its z-scores).
 4. One loop per place: of neighbouring accepted pairs (within NMS_RADIUS nodes on both
    sides) only the strongest is kept, so the arc joins the two closest views rather
    than a fan of near-misses that are more than a metre apart.
@@ -28,9 +31,10 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    connected area above ``run_z`` (backward) or ``run_forward_z`` (forward) gives one
    loop: at its strongest pair, moved to whichever of the three parallel diagonals has
    the higher mean over twice the run (one node off is more than a metre away), and
-   kept only if the relative yaw along the run says the two passes were parallel (180
-   degrees apart backward, 0 forward): a run through a 90-degree crossing is not a
-   stretch driven twice. One loop per stretch: none where steps 2-4 or another run
+   kept only if the relative yaw along the run says the two passes were parallel: its
+   axis near 0/180 degrees (corridors look alike both ways, so the alignment may flip),
+   and not all but never in the diagonal's direction. A run through a 90-degree
+   crossing is not a stretch driven twice, nor are two different streets. One loop per stretch: none where steps 2-4 or another run
    already closed the place or the same diagonal line.
 
 Descriptors without column signatures (files written before they existed) fall back to
@@ -51,16 +55,18 @@ from .params import MapParams
 from .verify import align_nodes, pair_yaw
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
-NMS_RADIUS = 2          # nodes
+NMS_RADIUS = 3          # nodes
 # Forward sequence support only between nodes more than this many exclusion widths apart.
 FORWARD_LAG_FACTOR = 4
 # Loose gates for which pairs are verified at all (z units); the real thresholds follow.
 _CANDIDATE_Z = 2.5
 _MAX_CANDIDATES = 20000
 _VERIFY_SAMPLE = 400    # distant pairs aligned to calibrate verification scores
+TAIL_PERCENTILE = 99.9  # of a recording's z-scores: the level of its best unrelated matches
 RUN_LENGTH = 15         # nodes of a long run (step 5); every pair of it must be valid
 COLOUR_WEIGHT = 2.0     # weight of the colour-histogram z-score against the descriptor's
 RUN_YAW_TOLERANCE = 45.0  # degrees: median deviation from parallel allowed along a run
+RUN_MIN_DIRECTION = 0.125  # share of a run's pairs whose yaw must agree with its direction
 SAME_LINE = 2           # runs within this many diagonals of a loop are the same stretch
 
 
@@ -72,6 +78,8 @@ class VerifiedThresholds:
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
     single_verify_z: float = 3.0  # ... and this verification
     near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
+    lone_z: float = 5.5       # a lone pair without verification (people hide the view) needs this z ...
+    lone_tail_ratio: float = 1.55  # ... and this many times the recording's z_tail
     run_z: float = 3.4        # long runs driven the other way (std. dev. of the recording's run scores)
     run_forward_z: float = 4.6  # ... and the same way (streets driven alike resemble each other)
 
@@ -91,6 +99,7 @@ class PairScores:
     cosine: np.ndarray
     m: int
     forward_min_lag: int = 0
+    z_tail: float = np.inf  # the recording's 99.9th percentile of z: its best unrelated matches
 
 
 def _mask_near(z: np.ndarray, exclude: int) -> None:
@@ -160,7 +169,7 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
         top = np.sort(np.argsort(-np.maximum(zz, seq), kind="stable")[:_MAX_CANDIDATES])
         a, b, zz, seq = a[top], b[top], zz[top], seq[top]
     if only_for is not None:   # every rule of select needs one of these
-        can = (seq >= only_for.seq_z) | (zz >= only_for.single_z)
+        can = (seq >= only_for.seq_z) | (zz >= min(only_for.single_z, only_for.lone_z))
         a, b, zz, seq = a[can], b[can], zz[can], seq[can]
     verify = shift = None
     if node_columns is not None:
@@ -174,8 +183,11 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
             score, shift, back = score[:a.size], shift[:a.size], score[a.size:]
             mu, sd = robust_stats(back.astype(np.float64)) if back.size >= 10 else (0.0, 1.0)
             verify = ((score - mu) / sd).astype(np.float32)
+    upper = z[np.triu_indices(m, gap + 1)]
+    upper = upper[np.isfinite(upper)]
+    z_tail = float(np.percentile(upper, TAIL_PERCENTILE)) if upper.size >= 100 else np.inf
     return PairScores(a.astype(np.int64), b.astype(np.int64), zz.astype(np.float32), seq, verify, shift,
-                      sims[a, b], m, FORWARD_LAG_FACTOR * exclude)
+                      sims[a, b], m, FORWARD_LAG_FACTOR * exclude, z_tail)
 
 
 def _background_pairs(m: int, exclude: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -203,7 +215,11 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
     else:  # no signatures: no verification, so ask more of both rules
         with_seq = (ps.seq >= th.seq_z + 1.0) & ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z))
         single = ps.z >= th.single_z + 2.0
-    ok = np.flatnonzero(with_seq | single)
+    # A lone pair far above the recording's own best unrelated matches needs no verification
+    # (people walking through a crossing spoil the column alignment, not the descriptor).
+    lone = ((ps.z >= th.lone_z) & (ps.z >= th.lone_tail_ratio * ps.z_tail)
+            & (ps.b - ps.a > ps.forward_min_lag))
+    ok = np.flatnonzero(with_seq | single | lone)
     if ok.size == 0:
         return ok
     strength = np.maximum(ps.z[ok], ps.seq[ok])
@@ -310,11 +326,18 @@ def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: 
         ra, rb = ra[inside], rb[inside]
         _, shift = align_nodes(cols, ra, rb)
         yaw = pair_yaw(shift, cols.shape[1], node_shifts[ra], node_shifts[rb], frame_width)
-        parallel = 180.0 if sign == -1 else 0.0
-        off = np.abs((yaw - parallel + 180.0) % 360.0 - 180.0)
-        if np.median(off) <= RUN_YAW_TOLERANCE:
-            agree = np.radians(yaw[off <= RUN_YAW_TOLERANCE])   # circular mean of the agreeing pairs
-            run_yaw = float(np.degrees(np.arctan2(np.sin(agree).mean(), np.cos(agree).mean())))
+        # Parallel passes: the yaw's axis along the run is near 0 / 180 degrees. Only the axis
+        # counts, since a corridor looks alike both ways (column alignment may flip it); the
+        # diagonal tells the direction. A 90-degree crossing fails here.
+        off = np.abs((yaw + 90.0) % 180.0 - 90.0)
+        # ... but a run whose yaw all but never agrees with the diagonal's direction (the
+        # alignment is sure the passes went the same way) is two different streets.
+        heading = 180.0 if sign == -1 else 0.0
+        agree = np.abs((yaw - heading + 180.0) % 360.0 - 180.0) <= RUN_YAW_TOLERANCE
+        if np.median(off) <= RUN_YAW_TOLERANCE and agree.mean() >= RUN_MIN_DIRECTION:
+            doubled = np.radians(2.0 * yaw[off <= RUN_YAW_TOLERANCE])   # axial mean of the agreeing pairs
+            axis = 0.5 * np.degrees(np.arctan2(np.sin(doubled).mean(), np.cos(doubled).mean()))
+            run_yaw = float((axis + (180.0 if sign == -1 else 0.0) + 180.0) % 360.0 - 180.0)
             out.append((a, b, float(score[a, b]), run_yaw, sign))
     return out
 

@@ -97,3 +97,21 @@ def test_scoring_only_what_a_rule_could_accept_keeps_the_same_loops(described):
     assert pick_full.size > 0                   # ... and the accepted loops stay the same
     assert set(zip(full.a[pick_full], full.b[pick_full])) == set(zip(lean.a[pick_lean], lean.b[pick_lean]))
     np.testing.assert_allclose(full.verify[pick_full], lean.verify[pick_lean], rtol=1e-5)
+
+
+def test_a_lone_pair_far_above_the_recordings_own_tail_needs_no_verification():
+    """People walking through a crossing spoil the column alignment: a pair whose z-score
+    stands far above the recording's best unrelated matches is accepted without it."""
+    from engine.loops_verified import DEFAULT_THRESHOLDS as th
+    from engine.loops_verified import PairScores, select
+
+    a, b = np.array([10, 40]), np.array([80, 45])      # the second pair: 5 nodes apart
+
+    def scores(z_tail, z=7.0):
+        return PairScores(a, b, np.full(2, z, np.float32), np.full(2, -np.inf, np.float32),
+                          np.full(2, -1.0, np.float32), np.zeros(2, np.int64), np.zeros(2, np.float32),
+                          100, 20, z_tail)
+
+    assert list(select(scores(z_tail=4.0))) == [0]                       # 7 >= 1.55 * 4
+    assert list(select(scores(z_tail=th.lone_z / th.lone_tail_ratio + 1.0))) == []
+    assert list(select(scores(z_tail=1.0, z=th.lone_z - 0.1))) == []     # below lone_z
