@@ -70,3 +70,20 @@ def test_long_runs_can_be_switched_off_from_the_cli(offset_indoor, tmp_path):
         loops[bool(flag)] = sum(1 for e in g.es if e["kind"] == "loop")
         assert int(g["long_runs"]) == (0 if flag else 1)
     assert loops == {False: 1, True: 0}
+
+
+
+def test_a_corridor_return_whose_alignment_flips_is_still_parallel():
+    """Indoors the column alignment says 0 degrees on most pairs of a true return driven the
+    other way (a corridor looks alike both ways): only the yaw's axis is checked."""
+    case = describe_case(Case("offset", "indoor", seed=40), shifts=(True,), input_height=128)
+    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+
+
+def test_runs_the_alignment_says_went_the_other_way_are_not_loops():
+    """Second laps of an outdoor loop also make backward runs between two streets; the
+    alignment is sure those pairs face the same way, so they are rejected."""
+    case = describe_case(Case("loop", "outdoor", seed=72, people=3, noise=0.01), shifts=(True,), input_height=128)
+    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 2
