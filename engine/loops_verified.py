@@ -34,8 +34,9 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    kept only if the relative yaw along the run says the two passes were parallel: its
    axis near 0/180 degrees (corridors look alike both ways, so the alignment may flip),
    and not all but never in the diagonal's direction. A run through a 90-degree
-   crossing is not a stretch driven twice, nor are two different streets. One loop per stretch: none where steps 2-4 or another run
-   already closed the place or the same diagonal line.
+   crossing is not a stretch driven twice, nor are two different streets. One loop
+   per stretch: none where steps 2-4 or another run already closed the place or the
+   same diagonal line.
 
 Descriptors without column signatures (files written before they existed) fall back to
 steps 1, 2 and 4 with a stricter single-pair rule; loops then carry no ``yaw``.
@@ -100,6 +101,7 @@ class PairScores:
     m: int
     forward_min_lag: int = 0
     z_tail: float = np.inf  # the recording's 99.9th percentile of z: its best unrelated matches
+    z_matrix: Optional[np.ndarray] = None  # (m, m) z of all pairs, temporal neighbours NaN (step 5)
 
 
 def _mask_near(z: np.ndarray, exclude: int) -> None:
@@ -187,7 +189,7 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
     upper = upper[np.isfinite(upper)]
     z_tail = float(np.percentile(upper, TAIL_PERCENTILE)) if upper.size >= 100 else np.inf
     return PairScores(a.astype(np.int64), b.astype(np.int64), zz.astype(np.float32), seq, verify, shift,
-                      sims[a, b], m, FORWARD_LAG_FACTOR * exclude, z_tail)
+                      sims[a, b], m, FORWARD_LAG_FACTOR * exclude, z_tail, z)
 
 
 def _background_pairs(m: int, exclude: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -273,18 +275,17 @@ def _diagonal_means(z: np.ndarray, a: int, b: int, sign: int, half: int) -> list
     return means
 
 
-def run_loops(node_vectors: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
+def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
               node_shifts: np.ndarray, frame_width: int, exclude: int,
               th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float, int]]:
     """Step 5: one (a, b, run score, yaw, direction) per long run of matching nodes, a < b.
 
-    direction is -1 for a backward run (driven the other way), +1 for a forward one.
+    ``z`` is the descriptor's calibrated z-matrix (``PairScores.z_matrix``); direction is
+    -1 for a backward run (driven the other way), +1 for a forward one.
     """
-    v = np.asarray(node_vectors, np.float32)
-    m = v.shape[0]
+    m = z.shape[0]
     if m < RUN_LENGTH + exclude + 2:
         return []
-    z = zscores(v @ v.T, exclude)
     col = np.asarray(node_colours, np.float32)
     zc = zscores(col @ col.T, exclude)
     combined = ((z + COLOUR_WEIGHT * zc) / np.sqrt(1.0 + COLOUR_WEIGHT ** 2)).astype(np.float32)
@@ -379,8 +380,9 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
             and node_shifts is not None and frame_width > 0):
         v = np.asarray(node_vectors, np.float32)
         near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
-        for a, b, strength, run_yaw, sign in run_loops(v, node_colours, node_columns, np.asarray(node_shifts),
-                                                       frame_width, int(params.neighbor_node_num), thresholds):
+        runs = run_loops(ps.z_matrix, node_colours, node_columns, np.asarray(node_shifts), frame_width,
+                         int(params.neighbor_node_num), thresholds)
+        for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
     out.sort(key=lambda lc: (lc.a, lc.b))
