@@ -323,7 +323,7 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
         if b <= a + exclude or b >= m:
             continue
         ra, rb = a + k, b + sign * k
-        inside = (ra < m) & (rb >= 0) & (rb < m)
+        inside = (ra >= 0) & (ra < m) & (rb >= 0) & (rb < m)
         ra, rb = ra[inside], rb[inside]
         _, shift = align_nodes(cols, ra, rb)
         yaw = pair_yaw(shift, cols.shape[1], node_shifts[ra], node_shifts[rb], frame_width)
@@ -338,7 +338,7 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
         if np.median(off) <= RUN_YAW_TOLERANCE and agree.mean() >= RUN_MIN_DIRECTION:
             doubled = np.radians(2.0 * yaw[off <= RUN_YAW_TOLERANCE])   # axial mean of the agreeing pairs
             axis = 0.5 * np.degrees(np.arctan2(np.sin(doubled).mean(), np.cos(doubled).mean()))
-            run_yaw = float((axis + (180.0 if sign == -1 else 0.0) + 180.0) % 360.0 - 180.0)
+            run_yaw = float((axis + heading + 180.0) % 360.0 - 180.0)
             out.append((a, b, float(score[a, b]), run_yaw, sign))
     return out
 
