@@ -53,7 +53,7 @@ from scipy import ndimage
 
 from .calibrate import robust_stats, zscores
 from .params import MapParams
-from .verify import align_nodes, pair_yaw
+from .verify import align_nodes, displacement, local_shifts, pair_yaw
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
 NMS_RADIUS = 3          # nodes
@@ -67,8 +67,14 @@ TAIL_PERCENTILE = 99.9  # of a recording's z-scores: the level of its best unrel
 RUN_LENGTH = 15         # nodes of a long run (step 5); every pair of it must be valid
 COLOUR_WEIGHT = 2.0     # weight of the colour-histogram z-score against the descriptor's
 RUN_YAW_TOLERANCE = 45.0  # degrees: median deviation from parallel allowed along a run
-RUN_MIN_DIRECTION = 0.125  # share of a run's pairs whose yaw must agree with its direction
+RUN_MIN_DIRECTION = 0.125  # share of a run's pairs whose yaw must agree with its direction ...
+RUN_MIN_DIRECTION_OPEN = 0.35  # ... where views change slowly (LOCAL_STEP_MAX), so the alignment is sure
 SAME_LINE = 2           # runs within this many diagonals of a loop are the same stretch
+# Local alignment measures how far apart two views are only where one node step moves
+# the view by less than this (columns of the signatures, 2.8 degrees each): near walls
+# (corridors) move further and distort, and there the descriptor's mean decides.
+LOCAL_STEP_MAX = 2.8
+_MAX_STEPS = 500        # node steps sampled to measure it
 
 
 @dataclass(frozen=True)
@@ -77,12 +83,13 @@ class VerifiedThresholds:
     seq_verify_z: float = 1.5  # verification needed with sequence support ...
     seq_sum_z: float = 5.5    # ... and sequence + verification together
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...
-    single_verify_z: float = 3.0  # ... and this verification
+    single_verify_z: float = 3.0  # ... and this verification, and a z above the recording's z_tail
     near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
     lone_z: float = 5.5       # a lone pair without verification (people hide the view) needs this z ...
     lone_tail_ratio: float = 1.55  # ... and this many times the recording's z_tail
     run_z: float = 3.4        # long runs driven the other way (std. dev. of the recording's run scores)
     run_forward_z: float = 4.6  # ... and the same way (streets driven alike resemble each other)
+    run_colour_z: float = 1.0  # mean colour z along a run: the walls' colours must match, not only the layout
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()
@@ -132,7 +139,10 @@ def _sequence_scores(z: np.ndarray, a: np.ndarray, b: np.ndarray, half: int,
         vals = np.where(inside, z[np.clip(ii, 0, m - 1), np.clip(jj, 0, m - 1)], np.nan)
         ok = ~np.isnan(vals)
         cnt = ok.sum(axis=1)
-        mean = np.where(cnt >= half + 1, np.where(ok, vals, 0.0).sum(axis=1) / np.maximum(cnt, 1), -np.inf)
+        # Fewer terms (the recording's ends, temporal neighbours) are weaker evidence: the
+        # mean is scaled by sqrt(terms / full run), as a mean of fewer z-scores spreads more.
+        mean = np.where(cnt >= half + 1, np.where(ok, vals, 0.0).sum(axis=1) / np.maximum(cnt, 1)
+                        * np.sqrt(cnt / k.size), -np.inf)
         if sign == 1:
             mean = np.where(b - a > forward_min_lag, mean, -np.inf)
         best = np.maximum(best, mean.astype(np.float32))
@@ -213,7 +223,9 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
         # so there the pair must stand out alone or be clearly stronger together.
         with_seq &= ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z)
                      | (ps.seq + ps.verify >= th.seq_sum_z + th.near_extra_z))
-        single = (ps.z >= th.single_z) & (ps.verify >= th.single_verify_z)
+        # ... and only above the recording's own best unrelated matches (a dead end
+        # looks like every other dead end of the building).
+        single = (ps.z >= th.single_z) & (ps.verify >= th.single_verify_z) & (ps.z >= ps.z_tail)
     else:  # no signatures: no verification, so ask more of both rules
         with_seq = (ps.seq >= th.seq_z + 1.0) & ((ps.b - ps.a > ps.forward_min_lag) | (ps.z >= th.single_z))
         single = ps.z >= th.single_z + 2.0
@@ -275,6 +287,38 @@ def _diagonal_means(z: np.ndarray, a: int, b: int, sign: int, half: int) -> list
     return means
 
 
+def _local_alignment_works(cols: np.ndarray) -> bool:
+    """Whether one node step moves the recording's views less than LOCAL_STEP_MAX columns (median)."""
+    steps = np.unique(np.linspace(0, cols.shape[0] - 2, min(cols.shape[0] - 1, _MAX_STEPS)).astype(np.int64))
+    _, shift = align_nodes(cols, steps, steps + 1)
+    return bool(np.median(displacement(local_shifts(cols, steps, steps + 1, shift))) < LOCAL_STEP_MAX)
+
+
+def _closest_diagonal(combined: np.ndarray, cols: np.ndarray, a: int, b: int, sign: int, local: bool) -> int:
+    """Which of the diagonals through (a, b - 1), (a, b), (a, b + 1) is the stretch itself: -1, 0 or 1.
+
+    One node off is more than a metre away after a sideways offset. With ``local`` (local
+    alignment can measure displacement in this recording, see ``_local_alignment_works``)
+    the diagonal whose views are least displaced against each other along the run wins;
+    otherwise the one with the higher mean score over twice the run.
+    """
+    m = combined.shape[0]
+    means = _diagonal_means(combined, a, b, sign, RUN_LENGTH)
+    if not local:
+        return int(np.argmax(means)) - 1
+    h = RUN_LENGTH // 2
+    apart = []
+    for db in (-1, 0, 1):
+        ia, ib = a + np.arange(-h, h + 1), b + db + sign * np.arange(-h, h + 1)
+        inside = (ia >= 0) & (ia < m) & (ib >= 0) & (ib < m)
+        if not np.isfinite(means[db + 1]) or not inside.any():
+            apart.append(np.inf)
+            continue
+        _, shift = align_nodes(cols, ia[inside], ib[inside])
+        apart.append(float(np.median(displacement(local_shifts(cols, ia[inside], ib[inside], shift)))))
+    return int(np.argmin(apart)) - 1
+
+
 def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
               node_shifts: np.ndarray, frame_width: int, exclude: int,
               th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float, int]]:
@@ -313,18 +357,21 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
     h = RUN_LENGTH // 2
     k = np.arange(-h, h + 1)
     cols = np.asarray(node_columns, np.float32)
+    local = _local_alignment_works(cols)
     out = []
     for pos in firsts:
         a, b = divmod(int(pos), m)
         sign = -1 if is_back[a, b] else 1
-        # Which of three parallel diagonals is the stretch itself: one node off is more
-        # than a metre away after a sideways offset, and a longer mean decides better.
-        b += int(np.argmax(_diagonal_means(combined, a, b, sign, RUN_LENGTH))) - 1
+        b += _closest_diagonal(combined, cols, a, b, sign, local)
         if b <= a + exclude or b >= m:
             continue
         ra, rb = a + k, b + sign * k
         inside = (ra >= 0) & (ra < m) & (rb >= 0) & (rb < m)
         ra, rb = ra[inside], rb[inside]
+        # A building whose corridors mirror each other matches in layout (the descriptor)
+        # along a whole run; its walls' colours do not.
+        if not np.nanmean(zc[ra, rb]) >= th.run_colour_z:
+            continue
         _, shift = align_nodes(cols, ra, rb)
         yaw = pair_yaw(shift, cols.shape[1], node_shifts[ra], node_shifts[rb], frame_width)
         # Parallel passes: the yaw's axis along the run is near 0 / 180 degrees. Only the axis
@@ -335,7 +382,10 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
         # alignment is sure the passes went the same way) is two different streets.
         heading = 180.0 if sign == -1 else 0.0
         agree = np.abs((yaw - heading + 180.0) % 360.0 - 180.0) <= RUN_YAW_TOLERANCE
-        if np.median(off) <= RUN_YAW_TOLERANCE and agree.mean() >= RUN_MIN_DIRECTION:
+        # Where views change slowly (open spaces) the alignment is seldom fooled, and must
+        # agree more often: mirror-alike corners and streets there face the wrong way.
+        min_direction = RUN_MIN_DIRECTION_OPEN if local else RUN_MIN_DIRECTION
+        if np.median(off) <= RUN_YAW_TOLERANCE and agree.mean() >= min_direction:
             doubled = np.radians(2.0 * yaw[off <= RUN_YAW_TOLERANCE])   # axial mean of the agreeing pairs
             axis = 0.5 * np.degrees(np.arctan2(np.sin(doubled).mean(), np.cos(doubled).mean()))
             run_yaw = float((axis + heading + 180.0) % 360.0 - 180.0)

@@ -120,3 +120,54 @@ def pair_yaw(shift_cols: np.ndarray, column_width: int, frame_shift_a: np.ndarra
            * 360.0 / float(frame_width))
     deg = (deg + 180.0) % 360.0 - 180.0
     return np.where(deg == -180.0, 180.0, deg)
+
+
+# Local alignment (after the global one): windows of LOCAL_HALF * 2 + 1 columns every
+# LOCAL_STEP columns, each searched over +-LOCAL_SEARCH columns.
+LOCAL_HALF = 8
+LOCAL_STEP = 8
+LOCAL_SEARCH = 10
+
+
+def local_shifts(columns: np.ndarray, a: np.ndarray, b: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """How far each part of panorama a appears displaced in b beyond the global ``shift``.
+
+    Returns (K, W // LOCAL_STEP) sub-column offsets, one per window of a. A pure rotation
+    gives zeros; a translation displaces nearby content by up to (translation / distance)
+    radians, towards the back on both sides for a step forwards.
+    """
+    cols = np.asarray(columns, np.float32)
+    a, b, shift = (np.asarray(x, np.int64) for x in (a, b, shift))
+    w = cols.shape[1]
+    offsets = np.arange(-LOCAL_SEARCH, LOCAL_SEARCH + 1)
+    # prod[k, c, d]: column c of a against column c + shift + d of b, summed over signals.
+    prod = np.empty((a.size, w, offsets.size), np.float32)
+    for s0 in range(0, a.size, _BATCH):
+        s1 = min(a.size, s0 + _BATCH)
+        ca = cols[a[s0:s1]]
+        index = (np.arange(w)[None, :] + shift[s0:s1, None]) % w
+        cb = cols[b[s0:s1][:, None], index]                         # b rolled by the global shift
+        for n, d in enumerate(offsets):
+            prod[s0:s1, :, n] = np.einsum("kwf,kwf->kw", ca, np.roll(cb, -d, axis=1))
+    centres = np.arange(0, w, LOCAL_STEP)
+    corr = sum(prod[:, (centres + j) % w, :] for j in range(-LOCAL_HALF, LOCAL_HALF + 1))   # (K, n, D)
+    best = np.argmax(corr, axis=2)
+    # Sub-column offset from a parabola through the peak and its neighbours (interior peaks only).
+    inner = np.clip(best, 1, offsets.size - 2)
+    left, mid, right = (np.take_along_axis(corr, (inner + o)[..., None], axis=2)[..., 0] for o in (-1, 0, 1))
+    curv = left - 2.0 * mid + right
+    peaked = (best == inner) & (curv < 0)
+    frac = np.where(peaked, 0.5 * (left - right) / np.where(peaked, curv, -1.0), 0.0)
+    return (offsets[best] + frac).astype(np.float32)
+
+
+def displacement(local: np.ndarray) -> np.ndarray:
+    """Amplitude of the first circular harmonic of ``local_shifts`` rows (columns).
+
+    A translation shifts content by roughly t sin(angle to it) / distance, one period
+    around the panorama: the amplitude grows with the distance between the two views
+    whatever their headings.
+    """
+    n = local.shape[-1]
+    phase = np.exp(-2j * np.pi * np.arange(n) / n)
+    return (2.0 * np.abs((local * phase).mean(axis=-1))).astype(np.float32)
