@@ -115,3 +115,37 @@ def test_a_lone_pair_far_above_the_recordings_own_tail_needs_no_verification():
     assert list(select(scores(z_tail=4.0))) == [0]                       # 7 >= 1.55 * 4
     assert list(select(scores(z_tail=th.lone_z / th.lone_tail_ratio + 1.0))) == []
     assert list(select(scores(z_tail=1.0, z=th.lone_z - 0.1))) == []     # below lone_z
+
+
+def test_a_verified_single_pair_must_also_stand_above_the_recordings_tail():
+    """A dead end looks like every other dead end of a building: a lone pair with a good
+    alignment is a loop only when its z-score is above the recording's 99.9th percentile."""
+    from engine.loops_verified import DEFAULT_THRESHOLDS as th
+    from engine.loops_verified import PairScores, select
+
+    a, b = np.array([10]), np.array([80])
+    z = th.single_z + 0.3   # above single_z, below lone_z * ... (no lone rule)
+
+    def scores(z_tail):
+        return PairScores(a, b, np.full(1, z, np.float32), np.full(1, -np.inf, np.float32),
+                          np.full(1, th.single_verify_z + 0.5, np.float32), np.zeros(1, np.int64),
+                          np.zeros(1, np.float32), 100, 20, z_tail)
+
+    assert z < th.lone_tail_ratio * (z - 1.0)          # the lone rule does not apply below
+    assert list(select(scores(z_tail=z - 1.0))) == [0]
+    assert list(select(scores(z_tail=z + 1.0))) == []
+
+
+def test_sequence_support_from_fewer_pairs_counts_for_less():
+    """At the recording's ends a diagonal has fewer pairs: their mean is scaled by
+    sqrt(pairs / full run), so three good pairs do not pass for five."""
+    from engine.loops_verified import SEQ_HALF, _sequence_scores
+
+    m = 30
+    z = np.zeros((m, m), np.float32)
+    k = np.arange(-SEQ_HALF, SEQ_HALF + 1)
+    z[10 + k, 20 + k] = 4.0                    # a whole forward run of 5 pairs
+    z[0 + k[SEQ_HALF:], 29 - k[SEQ_HALF:]] = 4.0   # a backward run cut by the matrix corner: 3 pairs
+    seq = _sequence_scores(z, np.array([10, 0]), np.array([20, 29]), SEQ_HALF)
+    assert seq[0] == pytest.approx(4.0)
+    assert seq[1] == pytest.approx(4.0 * np.sqrt((SEQ_HALF + 1) / (2 * SEQ_HALF + 1)))

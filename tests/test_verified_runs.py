@@ -87,3 +87,28 @@ def test_runs_the_alignment_says_went_the_other_way_are_not_loops():
     case = describe_case(Case("loop", "outdoor", seed=72, people=3, noise=0.01), shifts=(True,), input_height=128)
     ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 2
+
+
+def test_in_open_spaces_local_alignment_picks_the_diagonal_of_the_same_place(monkeypatch):
+    """Outdoors the mean score of the three parallel diagonals can favour the one a node
+    off (1 m away with the 0.8 m offset); local alignment finds the views least displaced."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("offset", "outdoor", seed=61), shifts=(True,), input_height=128)
+    descs = case.by_shift[True]
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+    monkeypatch.setattr(lv, "LOCAL_STEP_MAX", 0.0)   # the descriptor's mean decides everywhere
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 1 and ev.events_found == 0
+
+
+@pytest.mark.parametrize("look", ["indoor", "outdoor"])
+def test_mirror_alike_streets_of_a_crossing_route_are_not_loops(look):
+    """The crossing route's corridors mirror each other (same layout, other walls): runs
+    between them match the descriptor but not the walls' colours (indoors), or face the
+    wrong way to the column alignment (outdoors, where it is reliable)."""
+    case = describe_case(Case("crossing", look, seed=94, people=4, lighting_drift=0.3, noise=0.01),
+                         shifts=(True,), input_height=128)
+    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0

@@ -94,3 +94,29 @@ def test_npz_columns_key_is_optional(tmp_path, pano):
              descriptors=base["vectors"], meta=np.array("{}"), columns=np.zeros((n + 1, 4, 2), np.float16))
     with pytest.raises(InputError):
         Descriptors.load(tmp_path / "bad.npz")
+
+
+def _warped(pano: np.ndarray, amplitude_cols: float, roll_px: int = 0) -> np.ndarray:
+    """pano with content moved right by amplitude * sin(angle) signature columns (as a
+    step forwards moves the side walls backwards), then rolled by roll_px pixels."""
+    h, w = pano.shape[:2]
+    x = np.arange(w, dtype=np.float32)
+    moved = amplitude_cols * w / COLUMN_WIDTH * np.sin(2 * np.pi * x / w)
+    map_x = np.tile((x - moved) % w, (h, 1)).astype(np.float32)
+    map_y = np.repeat(np.arange(h, dtype=np.float32)[:, None], w, axis=1)
+    out = cv2.remap(pano, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+    return np.roll(out, roll_px, axis=1)
+
+
+@pytest.mark.parametrize("amplitude", [0.0, 2.0, 4.0])
+def test_local_shifts_measure_how_far_each_part_moved_beyond_the_roll(pano, amplitude):
+    from engine.verify import LOCAL_STEP, align_nodes, displacement, local_shifts
+
+    cols = np.stack([column_features(pano), column_features(_warped(pano, amplitude, roll_px=92))])
+    _, shift = align_nodes(cols, np.array([0]), np.array([1]))
+    local = local_shifts(cols, np.array([0]), np.array([1]), shift)[0]
+    centres = np.arange(0, COLUMN_WIDTH, LOCAL_STEP)
+    expected = amplitude * np.sin(2 * np.pi * centres / COLUMN_WIDTH)
+    # The global shift absorbs the mean; the rest is where each window moved.
+    assert np.median(np.abs(local - local.mean() - expected)) < 0.75
+    assert displacement(local[None])[0] == pytest.approx(amplitude, abs=0.75)
