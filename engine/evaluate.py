@@ -5,7 +5,8 @@ How pairs are counted (following the paper):
 * Every unordered node pair (i, j), i < j, is considered, except directly
   consecutive nodes (j - i == 1): those are path arcs, never loops. With m nodes
   that is (m - 1)(m - 2) / 2 pairs; TP + FP + TN + FN always equals it.
-* Same place: metric distance between the two node positions <= ``dist_th``.
+* Same place: metric distance between the two node positions <= ``dist_th`` (a nanometre
+  of slack, so that a pair exactly ``dist_th`` apart is not lost to rounding).
 * Temporal neighbours: j - i <= ``neighbor_node_num`` (the map's parameter by default).
 * Detected: the pair is joined by a loop arc whose status is not "rejected"
   (auto, confirmed and manual arcs all count).
@@ -43,6 +44,14 @@ from .poses import Poses
 
 # Bound the per-block distance matrix to about 32 MB of float64.
 _BLOCK_ELEMENTS = 4_000_000
+# "Within dist_th" includes dist_th itself: a pair 0.6 m along and 0.8 m across is 1.0 m
+# apart, but its squared distance computes as 1 + 2e-15. A nanometre of slack absorbs that.
+_DIST_SLACK = 1e-9
+
+
+def _within(d2, dist_th: float):
+    """Squared distances ``d2`` within ``dist_th`` metres (rounding errors included)."""
+    return d2 <= (dist_th + _DIST_SLACK) ** 2
 
 
 @dataclass
@@ -106,7 +115,7 @@ def _positive_pairs(x: np.ndarray, y: np.ndarray, dist_th: float, nn: int) -> tu
         i1 = min(m, i0 + rows)
         d2 = (x[i0:i1, None] - x[None, :]) ** 2 + (y[i0:i1, None] - y[None, :]) ** 2
         ii = np.arange(i0, i1)[:, None]
-        r, c = np.nonzero((d2 <= dist_th**2) & (cols[None, :] - ii > gap))
+        r, c = np.nonzero(_within(d2, dist_th) & (cols[None, :] - ii > gap))
         pi.append(r + i0)
         pj.append(c)
     if not pi:
@@ -155,7 +164,7 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         i, j = index[u], index[v]
         if j - i < 2:
             continue  # not a pair we count (a path arc)
-        same = (x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2 <= dist_th**2
+        same = _within((x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2, dist_th)
         positive = bool(same) and j - i > nn
         if d.get("status") == "rejected":
             loop_truth[(u, v)] = "FN" if positive else "TN"

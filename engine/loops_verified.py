@@ -79,7 +79,7 @@ _MAX_STEPS = 500        # node steps sampled to measure it
 
 @dataclass(frozen=True)
 class VerifiedThresholds:
-    seq_z: float = 3.3        # sequence support (mean z along the diagonal)
+    seq_z: float = 3.5        # sequence support (mean z along the diagonal)
     seq_verify_z: float = 1.5  # verification needed with sequence support ...
     seq_sum_z: float = 5.5    # ... and sequence + verification together
     single_z: float = 6.0     # a lone pair (crossing) needs this z-score ...

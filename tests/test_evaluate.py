@@ -98,6 +98,21 @@ def test_other_neighbourhood_and_distance():
     assert (ev.events_found, ev.events_total) == (0, 2)
 
 
+
+def test_a_pair_exactly_the_distance_threshold_apart_is_the_same_place():
+    """0.6 m along and 0.8 m across is 1.0 m: its squared distance computes as 1 + 2e-15,
+    which must not turn a true loop into a false one."""
+    tm = hand_map()
+    pos = POSITIONS.copy()
+    pos[10] = pos[1] + (0.6000000000000014, -0.8)   # the offset route's stagger, as computed
+    assert (pos[10] - pos[1]) @ (pos[10] - pos[1]) > 1.0
+    t = np.arange(len(pos)) * 2.0
+    ev = evaluate(tm, Poses(t=t, x=pos[:, 0], y=pos[:, 1]), dist_th=1.0)
+    assert (1, 10) in ev.tp_pairs
+    pos[10] = pos[1] + (0.0, 1.001)                   # a millimetre further is not
+    ev = evaluate(tm, Poses(t=t, x=pos[:, 0], y=pos[:, 1]), dist_th=1.0)
+    assert (1, 10) in ev.fp_pairs
+
 def test_positions_from_node_attributes():
     tm = hand_map()
     with pytest.raises(InputError, match="no ground-truth poses"):
