@@ -8,14 +8,16 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
 2. Sequence support: a revisit along a stretch (reverse drive, second lap, lateral
    offset) makes a run of high z-scores along a diagonal of the matrix, forwards or
    backwards. ``seq`` is the mean z over 2 * SEQ_HALF + 1 pairs on the better of the
-   two diagonals through (i, j). Unlike the paper's 5-node window it needs no node to
-   pass an absolute threshold, and it follows the matched segment's own direction.
+   two diagonals through (i, j), scaled down where fewer pairs exist (the recording's
+   ends). Unlike the paper's 5-node window it needs no node to pass an absolute
+   threshold, and it follows the matched segment's own direction.
 3. Yaw-aligned verification (``engine.verify``): every candidate pair is aligned by a
    circular shift search over column signatures; the alignment score, again as a
    z-score against distant pairs, must agree. The best shift is the loop's ``yaw``.
    A crossing at 90 degrees has no sequence support (the two passes share one point),
    so a single pair is accepted there only when both its own z-score and its
-   verification are high: verification stands in for the window count. People
+   verification are high, and its z-score is above the recording's best unrelated
+   matches: verification stands in for the window count. People
    walking through a crossing can spoil the alignment, so a lone pair is also accepted
    without it when its z-score is far above the recording's own best unrelated
    matches (``lone_tail_ratio`` times the 99.9th percentile of its z-scores).
@@ -29,14 +31,18 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    parallax-tolerant) are averaged over RUN_LENGTH consecutive pairs along a diagonal,
    and measured in standard deviations of the recording's own run scores. Each
    connected area above ``run_z`` (backward) or ``run_forward_z`` (forward) gives one
-   loop: at its strongest pair, moved to whichever of the three parallel diagonals has
-   the higher mean over twice the run (one node off is more than a metre away), and
-   kept only if the relative yaw along the run says the two passes were parallel: its
-   axis near 0/180 degrees (corridors look alike both ways, so the alignment may flip),
-   and not all but never in the diagonal's direction. A run through a 90-degree
-   crossing is not a stretch driven twice, nor are two different streets. One loop
-   per stretch: none where steps 2-4 or another run already closed the place or the
-   same diagonal line.
+   loop: at its strongest pair, moved to whichever of the three parallel diagonals is
+   the stretch itself (one node off is more than a metre away): in open spaces, where
+   one node step moves the view only a little, the one whose views local alignment
+   finds least displaced against each other (``engine.verify.local_shifts``), else the
+   one with the higher mean over twice the run. It is kept only if the walls' colours
+   match along it (mirror-alike corridors share the layout, not the walls) and the
+   relative yaw along the run says the two passes were parallel: its axis near 0/180
+   degrees (corridors look alike both ways, so the alignment may flip), and often
+   enough in the diagonal's direction (in open spaces, where the alignment is
+   reliable, on a third of the run). A run through a 90-degree crossing is not a
+   stretch driven twice, nor are two different streets. One loop per stretch: none
+   where steps 2-4 or another run already closed the place or the same diagonal line.
 
 Descriptors without column signatures (files written before they existed) fall back to
 steps 1, 2 and 4 with a stricter single-pair rule; loops then carry no ``yaw``.
