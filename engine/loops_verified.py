@@ -92,10 +92,10 @@ class VerifiedThresholds:
     single_verify_z: float = 3.0  # ... and this verification, and a z above the recording's z_tail
     near_extra_z: float = 2.0  # pairs a few nodes apart need seq + verify this much higher
     lone_z: float = 5.5       # a lone pair without verification (people hide the view) needs this z ...
-    lone_tail_ratio: float = 1.55  # ... and this many times the recording's z_tail
+    lone_tail_ratio: float = 1.45  # ... and this many times the recording's z_tail
     run_z: float = 3.8        # long runs driven the other way (std. dev. of the recording's run scores)
     run_forward_z: float = 4.6  # ... and the same way (streets driven alike resemble each other)
-    run_colour_z: float = 1.0  # mean colour z along a run: the walls' colours must match, not only the layout
+    run_colour_z: float = 1.1  # mean colour z along a run: the walls' colours must match, not only the layout
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()

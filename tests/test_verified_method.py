@@ -112,8 +112,8 @@ def test_a_lone_pair_far_above_the_recordings_own_tail_needs_no_verification():
                           np.full(2, -1.0, np.float32), np.zeros(2, np.int64), np.zeros(2, np.float32),
                           100, 20, z_tail)
 
-    assert list(select(scores(z_tail=4.0))) == [0]                       # 7 >= 1.55 * 4
-    assert list(select(scores(z_tail=th.lone_z / th.lone_tail_ratio + 1.0))) == []
+    assert list(select(scores(z_tail=7.0 / th.lone_tail_ratio - 0.2))) == [0]
+    assert list(select(scores(z_tail=7.0 / th.lone_tail_ratio + 0.2))) == []   # not far enough above
     assert list(select(scores(z_tail=1.0, z=th.lone_z - 0.1))) == []     # below lone_z
 
 
