@@ -2,11 +2,14 @@
 
 The viewer, the pair view and the screenshots all ask for the same few frames;
 decoding a video frame (a seek) costs milliseconds, so recently shown frames are
-kept together with their canonical panorama shift.
+kept together with their canonical panorama shift. The viewer's background decoding
+(``gui.frame_loader``) shares the cache, so every access holds its lock: a recording's
+reader is not safe to use from two threads at once.
 """
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Optional
@@ -28,22 +31,35 @@ class FrameCache:
         self.capacity = capacity
         self._items: "OrderedDict[int, ShownFrame]" = OrderedDict()
         self.known_shifts: dict[int, int] = {}   # source frame -> shift from the descriptors
+        self._lock = threading.RLock()
 
     def set_source(self, source) -> None:
-        self.source = source
-        self._items.clear()
+        with self._lock:
+            self.source = source
+            self._items.clear()
 
     @property
     def frame_count(self) -> int:
         return 0 if self.source is None else int(self.source.frame_count)
 
+    def peek(self, index: int) -> Optional[ShownFrame]:
+        """The frame ``index`` if it is decoded already, else None (never decodes)."""
+        with self._lock:
+            item = self._items.get(index)
+            if item is not None:
+                self._items.move_to_end(index)
+            return item
+
     def get(self, index: int) -> Optional[ShownFrame]:
         """The frame ``index`` or None when there is no recording (or it cannot be read)."""
+        with self._lock:
+            return self._get(index)
+
+    def _get(self, index: int) -> Optional[ShownFrame]:
         if self.source is None or not (0 <= index < self.frame_count):
             return None
-        item = self._items.get(index)
+        item = self.peek(index)
         if item is not None:
-            self._items.move_to_end(index)
             return item
         from engine.errors import InputError
         from engine.shift import canonical_shift

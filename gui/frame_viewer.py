@@ -2,8 +2,9 @@
 
 A timeline slider, step and play controls and the arrow keys move through the
 source frames. The canonical column chosen by the panorama shift is marked on the
-original. Frames are decoded on demand (debounced while the slider is dragged)
-and cached, so scrubbing never blocks the UI for long.
+original. Frames are decoded on demand and cached; while the slider is dragged or a
+recording plays they are decoded off the UI thread (``gui.frame_loader``), so a slow
+seek never freezes the window: the frame the slider rests on is shown when it is ready.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ from PySide6.QtWidgets import (QComboBox, QHBoxLayout, QLabel, QSlider, QStyle, 
                                QWidget)
 
 from .document import Document
-from .frame_cache import FrameCache
+from .frame_cache import FrameCache, ShownFrame
+from .frame_loader import FrameLoader
 from .style import CANONICAL_COLOR, panorama_view
 
 PLAY_SPEEDS = (("1×", 1.0), ("2×", 2.0), ("5×", 5.0), ("10×", 10.0), ("½×", 0.5))
@@ -103,7 +105,9 @@ class FrameViewer(QWidget):
         layout.addStretch(0)
         self._aspect = 2.0  # width / height of the frames: the canvas is sized to fit them
 
-        # Decoding happens after the slider rests for a moment (debounce).
+        # Decoding starts after the slider rests for a moment (debounce), in the background.
+        self.loader = FrameLoader(cache, self)
+        self.loader.loaded.connect(self._frame_loaded)
         self._decode_timer = QTimer(self)
         self._decode_timer.setSingleShot(True)
         self._decode_timer.setInterval(15)
@@ -122,7 +126,7 @@ class FrameViewer(QWidget):
         return self._current
 
     def show_frame(self, index: int, immediate: bool = True) -> None:
-        """Show source frame ``index`` (clamped); ``immediate`` decodes now."""
+        """Show source frame ``index`` (clamped); ``immediate`` decodes now, else in the background."""
         n = self.cache.frame_count
         if n == 0:
             return
@@ -132,7 +136,11 @@ class FrameViewer(QWidget):
         self.slider.blockSignals(False)
         self._pending = index
         if immediate:
-            self._decode_pending()
+            self._decode_timer.stop()
+            self.loader.cancel()
+            item = self.cache.get(index)
+            if item is not None:
+                self._display(index, item)
         else:
             self._decode_timer.start()
 
@@ -170,9 +178,15 @@ class FrameViewer(QWidget):
         self._play_timer.stop()
         self.play_button.setIcon(self.style().standardIcon(QStyle.StandardPixmap.SP_MediaPlay))
 
+    def shutdown(self) -> None:
+        """Stop playback and background decoding (before the recording is closed)."""
+        self.stop_play()
+        self._decode_timer.stop()
+        self.loader.wait()
+
     # -- internals ------------------------------------------------------------------
     def _source_changed(self) -> None:
-        self.stop_play()
+        self.shutdown()
         self.cache.set_source(self.doc.source)
         n = self.cache.frame_count
         self.slider.setEnabled(n > 0)
@@ -195,13 +209,22 @@ class FrameViewer(QWidget):
         if self._current >= self.cache.frame_count - 1:
             self.stop_play()
             return
-        self.show_frame(self._current + self._play_step)
+        self.show_frame(self._current + self._play_step, immediate=False)
 
     def _decode_pending(self) -> None:
-        index = self._pending
-        item = self.cache.get(index)
-        if item is None:
-            return
+        """The slider rested (or playback moved on): show the frame, decoding it in the background."""
+        item = self.cache.peek(self._pending)
+        if item is not None:
+            self._display(self._pending, item)
+        else:
+            self.loader.request(self._pending)
+
+    def _frame_loaded(self, index: int) -> None:
+        item = self.cache.peek(index) if index == self._pending else None
+        if item is not None:   # else the user has moved on, or the cache dropped it
+            self._display(index, item)
+
+    def _display(self, index: int, item: ShownFrame) -> None:
         self._current = index
         self.original_image.setImage(item.rgb, autoLevels=False, levels=(0, 255))
         shifted = np.roll(item.rgb, -item.shift, axis=1) if item.shift else item.rgb

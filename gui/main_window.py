@@ -1072,7 +1072,7 @@ class MainWindow(QMainWindow):
     def shutdown(self) -> None:
         """Stop the worker thread and timers and release the recording."""
         self.autosave_timer.stop()
-        self.frame_viewer.stop_play()
+        self.frame_viewer.shutdown()
         self.runner.stop()
         self.doc.close()
 
