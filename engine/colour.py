@@ -15,7 +15,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .shift import _check_rgb, _downscale
+from .shift import check_rgb, downscale
 
 # Bump when colour_histogram changes, so cached descriptors are recomputed.
 COLOURS_VERSION = 1
@@ -30,8 +30,8 @@ def colour_histogram(rgb: np.ndarray) -> np.ndarray:
     The square root (Hellinger) keeps one dominant colour (a long wall) from drowning
     the small distinctive ones; the dot product of two histograms is their similarity.
     """
-    _check_rgb(rgb)
-    small = _downscale(rgb, _WIDTH)
+    check_rgb(rgb)
+    small = downscale(rgb, _WIDTH)
     h = small.shape[0]
     band = small[int(h * _ROWS[0]):max(int(h * _ROWS[1]), int(h * _ROWS[0]) + 1)]
     # Grey world: divide each channel by its mean, so a colour cast or gain cancels.

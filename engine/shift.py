@@ -37,13 +37,14 @@ BAND = (0.15, 0.75)
 YAW_BANDS = 8
 
 
-def _check_rgb(rgb: np.ndarray) -> None:
+def check_rgb(rgb: np.ndarray) -> None:
+    """Raise InputError unless ``rgb`` is an H x W x 3 image (shared with ``engine.colour``)."""
     if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[1] < 2:
         shape = getattr(rgb, "shape", None)
         raise InputError(f"panorama shift needs an H x W x 3 image, got shape {shape}")
 
 
-def _downscale(rgb: np.ndarray, width: int) -> np.ndarray:
+def downscale(rgb: np.ndarray, width: int) -> np.ndarray:
     """Float32 RGB at ``min(width, W)`` columns, keeping the 2:1-or-whatever aspect."""
     h, w = rgb.shape[:2]
     if w <= width:
@@ -83,8 +84,8 @@ def heading_signals(rgb: np.ndarray, width: int = PROFILE_WIDTH) -> np.ndarray:
     Each channel is normalised to zero mean and unit norm over the columns, so a
     brightness gain or offset per channel leaves it unchanged; a flat channel is zero.
     """
-    _check_rgb(rgb)
-    sig = _band(_downscale(rgb, width)).mean(axis=0).T.astype(np.float64)
+    check_rgb(rgb)
+    sig = _band(downscale(rgb, width)).mean(axis=0).T.astype(np.float64)
     sig -= sig.mean(axis=1, keepdims=True)
     norm = np.linalg.norm(sig, axis=1, keepdims=True)
     return np.where(norm > 1e-6, sig / np.maximum(norm, 1e-12), 0.0)
@@ -147,8 +148,8 @@ def column_signature(rgb: np.ndarray, width: int = YAW_WIDTH) -> np.ndarray:
     normalised to zero mean and unit norm over the columns (flat signals become zero),
     so brightness gain/offset does not matter and correlations are Pearson-like.
     """
-    _check_rgb(rgb)
-    small = _band(_downscale(rgb, width))
+    check_rgb(rgb)
+    small = _band(downscale(rgb, width))
     grey = small.mean(axis=2)
     grad = _gradient_magnitude(grey)
     h, n = grey.shape
