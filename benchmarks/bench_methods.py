@@ -29,7 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 from engine.benchmark import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
-                              markdown_table, sum_rows)
+                              markdown_table, sum_rows, summary_table)
 from engine.params import MapParams
 from engine.synth import ROUTES
 
@@ -65,19 +65,6 @@ def run(seeds, methods, cache: Path, input_height: int) -> list[Row]:
                 rows += evaluate_methods(d, methods, calibrated_params(d, methods))
                 print(f"{case.name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     return rows
-
-
-def summary_table(rows: list[Row], methods) -> str:
-    """Per route type: false loops, revisit events found, precision, recall, F1 (totals)."""
-    lines = ["| route | method | runs | false loops | events found | precision | recall | F1 |",
-             "|---|---|---|---|---|---|---|---|"]
-    for route in ROUTE_TYPES + ("all",):
-        sel = rows if route == "all" else [r for r in rows if r.route == route]
-        for m in methods:
-            t = sum_rows(sel, m)
-            lines.append(f"| {route} | {m} | {t['runs']} | {t['fp']} | {t['events_found']}/{t['events_total']} "
-                         f"| {t['precision']:.3f} | {t['recall']:.3f} | {t['f1']:.3f} |")
-    return "\n".join(lines)
 
 
 def look_table(rows: list[Row], methods) -> str:
@@ -162,7 +149,7 @@ def main() -> int:
         seeds = [int(s) for s in args.seeds.split(",")]
         rows = run(seeds, PAPER_METHODS, cache, args.input_height)
         text = ("## Table I methods on the synthetic routes\n\n" + markdown_table(rows) + "\n\n"
-                + summary_table(rows, PAPER_METHODS) + "\n\n" + speed_line(rows) + "\n")
+                + summary_table(rows, PAPER_METHODS, ROUTE_TYPES) + "\n\n" + speed_line(rows) + "\n")
         out = RESULTS / "methods_paper.md"
     else:
         parts = []
@@ -171,7 +158,7 @@ def main() -> int:
                 continue
             seeds = [int(s) for s in seeds.split(",")]
             rows = run(seeds, ALL_METHODS, cache, args.input_height)
-            parts.append(f"## {label} {seeds}\n\n" + summary_table(rows, ALL_METHODS) + "\n\n<details><summary>"
+            parts.append(f"## {label} {seeds}\n\n" + summary_table(rows, ALL_METHODS, ROUTE_TYPES) + "\n\n<details><summary>"
                          f"per route type and look</summary>\n\n" + look_table(rows, ALL_METHODS)
                          + "\n\n</details>\n\n<details><summary>per recording</summary>\n\n"
                          + markdown_table(rows) + "\n\n</details>\n")

@@ -27,7 +27,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
 from engine.benchmark import (FPS, PAPER_METHODS, Case, Described, calibrated_params,  # noqa: E402
-                              evaluate_methods, sum_rows)
+                              evaluate_methods, summary_table)
 from engine.descriptors.base import Descriptors  # noqa: E402
 from engine.frames import Frame  # noqa: E402
 from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
@@ -108,18 +108,6 @@ def methods_rows(seeds, routes, methods, shifts, layout, input_height, cache):
     return rows
 
 
-def summary(rows, methods, routes) -> str:
-    lines = ["| route | method | runs | TP | false loops | events found | precision | recall |",
-             "|---|---|---|---|---|---|---|---|"]
-    for route in tuple(routes) + ("all",):
-        sel = rows if route == "all" else [r for r in rows if r.route == route]
-        for m in methods:
-            t = sum_rows(sel, m)
-            lines.append(f"| {route} | {m} | {t['runs']} | {t['tp']} | {t['fp']} | "
-                         f"{t['events_found']}/{t['events_total']} | {t['precision']:.3f} | {t['recall']:.3f} |")
-    return "\n".join(lines)
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mode", choices=("agreement", "methods", "verified"), default="methods")
@@ -137,14 +125,14 @@ def main() -> int:
         routes = ("crossing", "reverse")
         rows = methods_rows(seeds, routes, PAPER_METHODS, (True, False), args.layout, args.input_height, cache)
         text = (f"## Table I methods, layout {args.layout}, input height {args.input_height}, seeds {seeds}\n\n"
-                + summary(rows, PAPER_METHODS, routes))
+                + summary_table(rows, PAPER_METHODS, routes))
     else:
         seeds = [int(s) for s in (args.seeds or "8,9").split(",")]
         routes = ("crossing", "reverse", "offset", "loop")
         methods = ("ours", "verified")
         rows = methods_rows(seeds, routes, methods, (True,), args.layout, args.input_height, cache)
         text = (f"## verified and ours, layout {args.layout}, input height {args.input_height}, seeds {seeds}\n\n"
-                + summary(rows, methods, routes))
+                + summary_table(rows, methods, routes))
     RESULTS.mkdir(parents=True, exist_ok=True)
     out = RESULTS / f"shift_{args.mode}_{args.layout}_h{args.input_height}.md" if args.mode != "agreement" \
         else RESULTS / "shift_agreement.md"

@@ -183,6 +183,21 @@ def sum_rows(rows: list[Row], method: str) -> dict:
     return tot
 
 
+def summary_table(rows: list[Row], methods, routes) -> str:
+    """Totals per route type (and "all") and method: TP, false loops, revisit events found,
+    precision, recall, F1."""
+    lines = ["| route | method | runs | TP | false loops | events found | precision | recall | F1 |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for route in tuple(routes) + ("all",):
+        sel = rows if route == "all" else [r for r in rows if r.route == route]
+        for m in methods:
+            t = sum_rows(sel, m)
+            lines.append(f"| {route} | {m} | {t['runs']} | {t['tp']} | {t['fp']} | "
+                         f"{t['events_found']}/{t['events_total']} | {t['precision']:.3f} | {t['recall']:.3f} "
+                         f"| {t['f1']:.3f} |")
+    return "\n".join(lines)
+
+
 def markdown_table(rows: list[Row]) -> str:
     """Rows as a Markdown table in the layout of the paper's Tables II-V."""
     head = ("| route | look | seed | method | nodes | TP | FP | TN | FN | precision | recall | "
