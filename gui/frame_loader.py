@@ -30,7 +30,11 @@ class _DecodeThread(QThread):
 
     def run(self) -> None:
         while (index := self.loader._take()) is not None:
-            if self.loader.cache.get(index) is not None:
+            try:
+                item = self.loader.cache.get(index)
+            except Exception:   # a reader failing here must not stop the loader: no frame shown
+                item = None
+            if item is not None:
                 self.loader.loaded.emit(index)
 
 
@@ -67,6 +71,7 @@ class FrameLoader(QObject):
         self.cancel()
         for thread in [t for t in _THREADS if t.loader is self]:
             thread.wait()
+            _THREADS.discard(thread)
 
     def _take(self) -> Optional[int]:
         """The next index to decode, or None: then the thread ends (called in the thread)."""
