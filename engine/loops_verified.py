@@ -23,7 +23,8 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    matches (``lone_tail_ratio`` times the 99.9th percentile of its z-scores).
 4. One loop per place: of neighbouring accepted pairs (within NMS_RADIUS nodes on both
    sides) only the strongest is kept, so the arc joins the two closest views rather
-   than a fan of near-misses that are more than a metre apart.
+   than a fan of near-misses that are more than a metre apart; likewise of pairs on one
+   diagonal line whose sequence windows overlap (the same evidence counted twice).
 5. Long runs (``run_loops``): a stretch driven twice with a lateral offset matches
    only weakly node by node (near walls are magnified, benchmarks/results/
    offset_analysis.md), but it does so for many nodes in a row. The descriptor's
@@ -246,7 +247,11 @@ def select(ps: PairScores, th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> np.nd
     if ps.verify is not None:
         strength = strength + ps.verify[ok]
     keep = _local_maxima(ps.a[ok], ps.b[ok], strength, NMS_RADIUS)
-    return ok[keep]
+    ok, strength = ok[keep], strength[keep]
+    # Pairs on one diagonal line whose sequence windows overlap share their evidence: only
+    # the strongest stays (a 90-degree crossing's own diagonal of look-alike approaches
+    # otherwise adds a second loop a few metres off).
+    return ok[_line_maxima(ps.a[ok], ps.b[ok], strength, 2 * SEQ_HALF)]
 
 
 def _local_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, radius: int) -> np.ndarray:
@@ -260,6 +265,19 @@ def _local_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, radius: in
         band = order[lo:hi]
         near = band[np.abs(b[band] - b[idx]) <= radius]
         keep[idx] = strength[idx] >= strength[near].max()
+    return keep
+
+
+def _line_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, reach: int) -> np.ndarray:
+    """Mask of pairs that no stronger pair beats on their diagonal line (forward b - a or
+    backward a + b, within one diagonal) within ``reach`` nodes of a."""
+    keep = np.ones(a.size, bool)
+    for s0 in range(0, a.size, 1024):   # bounded memory on maps with many loops
+        s1 = min(a.size, s0 + 1024)
+        near = np.abs(a[s0:s1, None] - a[None, :]) <= reach
+        line = ((np.abs((b - a)[s0:s1, None] - (b - a)[None, :]) <= 1)
+                | (np.abs((b + a)[s0:s1, None] - (b + a)[None, :]) <= 1))
+        keep[s0:s1] = ~np.any(near & line & (strength[None, :] > strength[s0:s1, None]), axis=1)
     return keep
 
 

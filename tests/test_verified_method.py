@@ -149,3 +149,19 @@ def test_sequence_support_from_fewer_pairs_counts_for_less():
     seq = _sequence_scores(z, np.array([10, 0]), np.array([20, 29]), SEQ_HALF)
     assert seq[0] == pytest.approx(4.0)
     assert seq[1] == pytest.approx(4.0 * np.sqrt((SEQ_HALF + 1) / (2 * SEQ_HALF + 1)))
+
+
+def test_pairs_on_one_diagonal_line_with_overlapping_windows_keep_one_loop():
+    """Sequence support of pairs 4 nodes apart on one diagonal line is the same evidence
+    counted twice (a crossing's look-alike approaches): only the stronger pair stays; a
+    pair on another line, or further along, stays too."""
+    from engine.loops_verified import DEFAULT_THRESHOLDS as th
+    from engine.loops_verified import PairScores, select
+
+    a = np.array([20, 24, 24, 40])
+    b = np.array([116, 120, 128, 136])    # 20/24 on the line b - a = 96; (24, 128) not; 40 is 16 on
+    seq = np.array([4.0, 4.5, 4.0, 4.0], np.float32)
+    ps = PairScores(a, b, np.full(4, 4.0, np.float32), seq, np.full(4, 2.5, np.float32),
+                    np.zeros(4, np.int64), np.zeros(4, np.float32), 200, 20, 10.0)
+    assert th.seq_z <= 4.0 and 4.0 + 2.5 >= th.seq_sum_z
+    assert sorted(zip(ps.a[select(ps)].tolist(), ps.b[select(ps)].tolist())) == [(24, 120), (24, 128), (40, 136)]
