@@ -1,6 +1,6 @@
 """The ``verified`` loop method: calibrated scores, sequence support, yaw-aligned verification.
 
-Beyond the paper (see README "beyond the paper"), in five steps, all on plain arrays:
+Beyond the paper (see README "beyond the paper"), in five steps and a final check, all on plain arrays:
 
 1. Calibration (``engine.calibrate``): cosine similarities become z-scores against each
    node's own background of distant nodes, so thresholds mean the same for any
@@ -45,6 +45,12 @@ Beyond the paper (see README "beyond the paper"), in five steps, all on plain ar
    stretch driven twice, nor are two different streets. One loop per stretch: none
    where steps 2-4 or another run already closed the place or the same diagonal line.
 
+Last, every loop with a yaw must be possible: to pass a place again the same way the robot
+must have turned a full circle in between (or made two U-turns), to pass it the other way a
+U-turn. The turning between the two nodes is summed from the yaws of consecutive nodes
+(``engine.verify.cumulative_turning``; errors only add to it), and loops joined by a
+(nearly) straight drive are dropped: a street that looks alike along its length.
+
 Descriptors without column signatures (files written before they existed) fall back to
 steps 1, 2 and 4 with a stricter single-pair rule; loops then carry no ``yaw``.
 """
@@ -60,7 +66,7 @@ from scipy import ndimage
 
 from .calibrate import robust_stats, zscores
 from .params import MapParams
-from .verify import align_nodes, displacement, local_shifts, pair_yaw
+from .verify import align_nodes, cumulative_turning, displacement, local_shifts, pair_yaw
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
 NMS_RADIUS = 3          # nodes
@@ -82,6 +88,13 @@ SAME_LINE = 2           # runs within this many diagonals of a loop are the same
 # (corridors) move further and distort, and there the descriptor's mean decides.
 LOCAL_STEP_MAX = 2.8
 _MAX_STEPS = 500        # node steps sampled to measure it
+# To come back to a place the robot must have turned in between: a full circle (or two
+# U-turns) to pass it the same way again, a U-turn to pass it the other way. Loops whose
+# nodes were joined by a (nearly) straight drive are a street that looks alike along its
+# length. Half of each, as turning measured from consecutive alignments can fall short.
+MIN_TURN_SAME_WAY = 180.0   # degrees between the nodes of a loop with yaw near 0
+MIN_TURN_OTHER_WAY = 90.0   # ... and near 180
+_WAY_TOLERANCE = 60.0       # degrees: how near 0 / 180 a loop's yaw must be to be checked
 
 
 @dataclass(frozen=True)
@@ -459,5 +472,21 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
+    if out and node_columns is not None and node_shifts is not None and frame_width > 0:
+        out = _turned_in_between(out, cumulative_turning(node_columns, node_shifts, frame_width))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
+
+
+def _turned_in_between(loops: list, turned: np.ndarray) -> list:
+    """The loops whose nodes the robot turned enough between (see MIN_TURN_SAME_WAY)."""
+    kept = []
+    for lc in loops:
+        if lc.yaw is not None:
+            turn = turned[lc.b] - turned[lc.a]
+            same_way = abs((lc.yaw + 180.0) % 360.0 - 180.0) < _WAY_TOLERANCE
+            other_way = abs(lc.yaw % 360.0 - 180.0) < _WAY_TOLERANCE
+            if (same_way and turn < MIN_TURN_SAME_WAY) or (other_way and turn < MIN_TURN_OTHER_WAY):
+                continue
+        kept.append(lc)
+    return kept

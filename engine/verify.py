@@ -171,3 +171,20 @@ def displacement(local: np.ndarray) -> np.ndarray:
     n = local.shape[-1]
     phase = np.exp(-2j * np.pi * np.arange(n) / n)
     return (2.0 * np.abs((local * phase).mean(axis=-1))).astype(np.float32)
+
+
+def cumulative_turning(columns: np.ndarray, frame_shifts: np.ndarray, frame_width: int) -> np.ndarray:
+    """Degrees the robot has turned, summed without sign, from node 0 to each node.
+
+    Each step is the relative yaw of consecutive nodes (``pair_yaw`` of their alignment).
+    A misaligned step (a corridor looks alike both ways) only adds turning, so a small
+    value between two nodes reliably means "drove (nearly) straight from one to the other".
+    """
+    n = np.asarray(columns).shape[0]
+    if n < 2:
+        return np.zeros(n)
+    steps = np.arange(n - 1)
+    _, shift = align_nodes(columns, steps, steps + 1)
+    shifts = np.asarray(frame_shifts)
+    yaw = pair_yaw(shift, np.asarray(columns).shape[1], shifts[steps], shifts[steps + 1], frame_width)
+    return np.concatenate([[0.0], np.cumsum(np.abs(yaw))])

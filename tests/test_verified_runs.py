@@ -113,3 +113,39 @@ def test_mirror_alike_streets_of_a_crossing_route_are_not_loops(look):
                          shifts=(True,), input_height=128)
     ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
     assert ev.fp == 0
+
+
+def test_turning_between_nodes_is_measured_from_consecutive_alignments():
+    """On the reverse route (out, left, a U-turn at the dead end, right, back: 360 degrees in
+    all) the U-turn shows as a half circle, and the straight way out stays well below it."""
+    from engine.calibrate import node_threshold
+    from engine.nodes import make_nodes
+    from engine.verify import cumulative_turning
+
+    case = describe_case(Case("reverse", "outdoor", seed=0), shifts=(True,), input_height=128)
+    descs = case.by_shift[True]
+    rows = make_nodes(descs.vectors, node_threshold(descs.vectors))
+    turned = cumulative_turning(descs.columns[rows], descs.shifts[rows], int(descs.meta["frame_width"]))
+    x, y = case.poses.at(descs.stamps[rows])
+    assert turned.shape == (rows.size,) and np.all(np.diff(turned) >= 0)
+    assert turned[-1] >= 300.0
+    dead_end = int(np.argmax(y))
+    assert turned[dead_end + 8] - turned[dead_end - 8] >= 150.0   # the U-turn
+    straight = int(np.flatnonzero(x >= 25.0)[0])                   # 25 m along the way out
+    assert turned[straight] < 90.0
+
+
+def test_a_street_that_looks_alike_along_its_length_is_not_a_loop(monkeypatch):
+    """Seed 182's crossing street matches itself 24 m further on the same pass, with
+    sequence support and no rotation: the robot drove straight in between, so it never
+    came back."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("crossing", "outdoor", seed=182, people=3, noise=0.01), shifts=(True,),
+                         input_height=128)
+    descs = case.by_shift[True]
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+    monkeypatch.setattr(lv, "MIN_TURN_SAME_WAY", 0.0)
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 1
