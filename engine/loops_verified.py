@@ -25,6 +25,9 @@ Beyond the paper (see README "beyond the paper"), in five steps and a final chec
    sides) only the strongest is kept, so the arc joins the two closest views rather
    than a fan of near-misses that are more than a metre apart; likewise of pairs on one
    diagonal line whose sequence windows overlap (the same evidence counted twice).
+   In open spaces a loop with sequence support between parallel passes is then moved to
+   whichever of the three parallel diagonals is the stretch itself, as in step 5
+   (``_place_on_stretch``): the strongest pair can be one node off.
 5. Long runs (``run_loops``): a stretch driven twice with a lateral offset matches
    only weakly node by node (near walls are magnified, benchmarks/results/
    offset_analysis.md), but it does so for many nodes in a row. The descriptor's
@@ -88,6 +91,7 @@ SAME_LINE = 2           # runs within this many diagonals of a loop are the same
 # (corridors) move further and distort, and there the descriptor's mean decides.
 LOCAL_STEP_MAX = 2.8
 _MAX_STEPS = 500        # node steps sampled to measure it
+_PARALLEL_AXIS = 30.0   # degrees: a sequence loop this near 0 / 180 is a stretch driven twice (step 4b)
 # To come back to a place the robot must have turned in between: a full circle (or two
 # U-turns) to pass it the same way again, a U-turn to pass it the other way. Loops whose
 # nodes were joined by a (nearly) straight drive are a street that looks alike along its
@@ -331,13 +335,16 @@ def _local_alignment_works(cols: np.ndarray) -> bool:
     return bool(np.median(displacement(local_shifts(cols, steps, steps + 1, shift))) < LOCAL_STEP_MAX)
 
 
-def _closest_diagonal(combined: np.ndarray, cols: np.ndarray, a: int, b: int, sign: int, local: bool) -> int:
+def _closest_diagonal(combined: np.ndarray, cols: np.ndarray, a: int, b: int, sign: int, local: bool,
+                      exclude: int) -> int:
     """Which of the diagonals through (a, b - 1), (a, b), (a, b + 1) is the stretch itself: -1, 0 or 1.
 
     One node off is more than a metre away after a sideways offset. With ``local`` (local
     alignment can measure displacement in this recording, see ``_local_alignment_works``)
     the diagonal whose views are least displaced against each other along the run wins;
-    otherwise the one with the higher mean score over twice the run.
+    otherwise the one with the higher mean score over twice the run. Pairs of temporal
+    neighbours (a U-turn's apex: the same node on both sides) do not count, and a diagonal
+    with fewer than half a run of other pairs is not chosen.
     """
     m = combined.shape[0]
     means = _diagonal_means(combined, a, b, sign, RUN_LENGTH)
@@ -347,22 +354,26 @@ def _closest_diagonal(combined: np.ndarray, cols: np.ndarray, a: int, b: int, si
     apart = []
     for db in (-1, 0, 1):
         ia, ib = a + np.arange(-h, h + 1), b + db + sign * np.arange(-h, h + 1)
-        inside = (ia >= 0) & (ia < m) & (ib >= 0) & (ib < m)
-        if not np.isfinite(means[db + 1]) or not inside.any():
+        ok = (ia >= 0) & (ia < m) & (ib >= 0) & (ib < m) & (np.abs(ib - ia) > exclude)
+        if not np.isfinite(means[db + 1]) or np.count_nonzero(ok) <= h:
             apart.append(np.inf)
             continue
-        _, shift = align_nodes(cols, ia[inside], ib[inside])
-        apart.append(float(np.median(displacement(local_shifts(cols, ia[inside], ib[inside], shift)))))
+        _, shift = align_nodes(cols, ia[ok], ib[ok])
+        apart.append(float(np.median(displacement(local_shifts(cols, ia[ok], ib[ok], shift)))))
+    if not np.isfinite(min(apart)):
+        return 0
     return int(np.argmin(apart)) - 1
 
 
 def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
               node_shifts: np.ndarray, frame_width: int, exclude: int,
-              th: VerifiedThresholds = DEFAULT_THRESHOLDS) -> list[tuple[int, int, float, float, int]]:
+              th: VerifiedThresholds = DEFAULT_THRESHOLDS,
+              local: Optional[bool] = None) -> list[tuple[int, int, float, float, int]]:
     """Step 5: one (a, b, run score, yaw, direction) per long run of matching nodes, a < b.
 
     ``z`` is the descriptor's calibrated z-matrix (``PairScores.z_matrix``); direction is
-    -1 for a backward run (driven the other way), +1 for a forward one.
+    -1 for a backward run (driven the other way), +1 for a forward one. ``local``:
+    ``_local_alignment_works`` of the columns, measured here unless given.
     """
     m = z.shape[0]
     if m < RUN_LENGTH + exclude + 2:
@@ -394,12 +405,13 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
     h = RUN_LENGTH // 2
     k = np.arange(-h, h + 1)
     cols = np.asarray(node_columns, np.float32)
-    local = _local_alignment_works(cols)
+    if local is None:
+        local = _local_alignment_works(cols)
     out = []
     for pos in firsts:
         a, b = divmod(int(pos), m)
         sign = -1 if is_back[a, b] else 1
-        b += _closest_diagonal(combined, cols, a, b, sign, local)
+        b += _closest_diagonal(combined, cols, a, b, sign, local, exclude)
         if b <= a + exclude or b >= m:
             continue
         ra, rb = a + k, b + sign * k
@@ -430,6 +442,32 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
     return out
 
 
+def _place_on_stretch(ps: PairScores, chosen: np.ndarray, cols: np.ndarray, node_shifts: np.ndarray,
+                      frame_width: int, exclude: int, th: VerifiedThresholds) -> np.ndarray:
+    """Step 4b (open spaces): move each sequence-supported loop to the parallel diagonal of
+    its stretch whose views are least displaced (``_closest_diagonal`` over a run's length).
+
+    The sequence score finds the stretch; which of three neighbouring diagonals is the
+    same place is decided as for long runs, since one node off is more than a metre away.
+    Only pairs whose yaw says the passes were parallel (not a crossing), and only to a
+    pair that has sequence support itself (a candidate of ``ps``).
+    """
+    where = {(int(a), int(b)): n for n, (a, b) in enumerate(zip(ps.a, ps.b))}
+    yaw = pair_yaw(ps.shift[chosen], cols.shape[1], node_shifts[ps.a[chosen]], node_shifts[ps.b[chosen]],
+                   frame_width)
+    placed = []
+    for c, pair_yaw_deg in zip(chosen, yaw):
+        a, b = int(ps.a[c]), int(ps.b[c])
+        off_axis = abs((pair_yaw_deg + 90.0) % 180.0 - 90.0)
+        if ps.seq[c] < th.seq_z or off_axis > _PARALLEL_AXIS:
+            placed.append(c)
+            continue
+        sign = -1 if abs(pair_yaw_deg) > 90.0 else 1
+        db = _closest_diagonal(ps.z_matrix, cols, a, b, sign, True, exclude)
+        placed.append(where.get((a, b + db), c))
+    return np.unique(np.asarray(placed, np.int64))
+
+
 def _same_stretch(a: int, b: int, sign: int, other, near: int) -> bool:
     """Whether loop ``other`` closes the same place or the same stretch as run (a, b)."""
     if abs(a - other.a) <= near and abs(b - other.b) <= near:
@@ -451,9 +489,17 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     """
     from .loops import LoopCandidate
 
-    ps = score_pairs(node_vectors, node_columns, int(params.neighbor_node_num), only_for=thresholds)
+    exclude = int(params.neighbor_node_num)
+    ps = score_pairs(node_vectors, node_columns, exclude, only_for=thresholds)
     chosen = select(ps, thresholds)
     yaw = None
+    local = None
+    if ps.shift is not None and node_shifts is not None and frame_width > 0:
+        cols = np.asarray(node_columns, np.float32)
+        local = _local_alignment_works(cols)
+        if local and chosen.size:
+            chosen = _place_on_stretch(ps, chosen, cols, np.asarray(node_shifts), frame_width, exclude,
+                                       thresholds)
     if ps.shift is not None and chosen.size and node_shifts is not None and frame_width > 0:
         width = np.asarray(node_columns).shape[1]
         yaw = pair_yaw(ps.shift[chosen], width, np.asarray(node_shifts)[ps.a[chosen]],
@@ -468,7 +514,7 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         v = np.asarray(node_vectors, np.float32)
         near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
         runs = run_loops(ps.z_matrix, node_colours, node_columns, np.asarray(node_shifts), frame_width,
-                         int(params.neighbor_node_num), thresholds)
+                         exclude, thresholds, local)
         for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))

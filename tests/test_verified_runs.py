@@ -149,3 +149,19 @@ def test_a_street_that_looks_alike_along_its_length_is_not_a_loop(monkeypatch):
     monkeypatch.setattr(lv, "MIN_TURN_SAME_WAY", 0.0)
     ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
     assert ev.fp == 1
+
+
+def test_a_sequence_loop_is_placed_on_the_diagonal_of_the_same_place(monkeypatch):
+    """Seed 202's return after the U-turn has sequence support on two parallel diagonals; its
+    strongest pair is one node off (1.3 m). Outdoors, local alignment over the stretch finds
+    the diagonal whose views are least displaced, as for long runs."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("reverse", "outdoor", seed=202, people=3, noise=0.01), shifts=(True,),
+                         input_height=128)
+    descs = case.by_shift[True]
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+    monkeypatch.setattr(lv, "_PARALLEL_AXIS", -1.0)   # no sequence loop is moved
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 1
