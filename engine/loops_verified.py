@@ -1,6 +1,6 @@
 """The ``verified`` loop method: calibrated scores, sequence support, yaw-aligned verification.
 
-Beyond the paper (see README "beyond the paper"), in five steps and a final check, all on plain arrays:
+Beyond the paper (see README "beyond the paper"), in six steps and a final check, all on plain arrays:
 
 1. Calibration (``engine.calibrate``): cosine similarities become z-scores against each
    node's own background of distant nodes, so thresholds mean the same for any
@@ -47,6 +47,10 @@ Beyond the paper (see README "beyond the paper"), in five steps and a final chec
    reliable, on a third of the run). A run through a 90-degree crossing is not a
    stretch driven twice, nor are two different streets. One loop per stretch: none
    where steps 2-4 or another run already closed the place or the same diagonal line.
+
+6. Places passed three times or more (``_visits_again``): where two loops share a place
+   (laps 1-2 and 2-3), their other two visits are the same place as well, so a loop
+   between them needs only moderate evidence (``again_seq_z``, ``again_verify_z``).
 
 Last, every loop with a yaw must be possible: to pass a place again the same way the robot
 must have turned a full circle in between (or made two U-turns), to pass it the other way a
@@ -114,6 +118,8 @@ class VerifiedThresholds:
     run_z: float = 3.8        # long runs driven the other way (std. dev. of the recording's run scores)
     run_forward_z: float = 4.6  # ... and the same way (streets driven alike resemble each other)
     run_colour_z: float = 1.1  # mean colour z along a run: the walls' colours must match, not only the layout
+    again_seq_z: float = 2.5   # a place two loops already join to a third visit: sequence support ...
+    again_verify_z: float = 1.0  # ... and verification for the loop between the other two
 
 
 DEFAULT_THRESHOLDS = VerifiedThresholds()
@@ -205,7 +211,7 @@ def score_pairs(node_vectors: np.ndarray, node_columns: Optional[np.ndarray], ex
         top = np.sort(np.argsort(-np.maximum(zz, seq), kind="stable")[:_MAX_CANDIDATES])
         a, b, zz, seq = a[top], b[top], zz[top], seq[top]
     if only_for is not None:   # every rule of select needs one of these
-        can = (seq >= only_for.seq_z) | (zz >= min(only_for.single_z, only_for.lone_z))
+        can = (seq >= min(only_for.seq_z, only_for.again_seq_z)) | (zz >= min(only_for.single_z, only_for.lone_z))
         a, b, zz, seq = a[can], b[can], zz[can], seq[can]
     verify = shift = None
     if node_columns is not None:
@@ -518,10 +524,50 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
+    if ps.shift is not None and node_shifts is not None and frame_width > 0:
+        out += _visits_again(out, ps, np.asarray(node_shifts), frame_width, np.asarray(node_columns).shape[1],
+                             exclude, thresholds)
     if out and node_columns is not None and node_shifts is not None and frame_width > 0:
         out = _turned_in_between(out, cumulative_turning(node_columns, node_shifts, frame_width))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
+
+
+def _visits_again(loops: list, ps: PairScores, node_shifts: np.ndarray, frame_width: int, width: int,
+                  exclude: int, th: VerifiedThresholds) -> list:
+    """Step 6: loops between the other visits of a place two loops already share.
+
+    A place passed three times (a third lap) is joined by loops 1-2 and 2-3; the pair of
+    visits 1 and 3 is the same place too, so near it a pair needs only moderate sequence
+    support and verification (``again_seq_z``, ``again_verify_z``). Returns the new loops.
+    """
+    from .loops import LoopCandidate
+
+    ok = np.flatnonzero((ps.seq >= th.again_seq_z) & (ps.verify >= th.again_verify_z))
+    if len(loops) < 2 or ok.size == 0:
+        return []
+    strength = ps.seq[ok] + ps.verify[ok]
+    ends = sorted((node, n, other) for n, lc in enumerate(loops)
+                  for node, other in ((lc.a, lc.b), (lc.b, lc.a)))
+    added: list = []
+    for i, (node, n, other) in enumerate(ends):
+        for node2, n2, other2 in ends[i + 1:]:
+            if node2 - node > NMS_RADIUS:
+                break
+            p, q = sorted((other, other2))
+            if n2 == n or q - p <= exclude:
+                continue
+            if any(abs(lc.a - p) <= NMS_RADIUS and abs(lc.b - q) <= NMS_RADIUS for lc in loops + added):
+                continue
+            near = np.flatnonzero((np.abs(ps.a[ok] - p) <= NMS_RADIUS) & (np.abs(ps.b[ok] - q) <= NMS_RADIUS))
+            if near.size == 0:
+                continue
+            c = ok[near[np.argmax(strength[near])]]
+            yaw = pair_yaw(ps.shift[c:c + 1], width, node_shifts[ps.a[c:c + 1]], node_shifts[ps.b[c:c + 1]],
+                           frame_width)
+            added.append(LoopCandidate(int(ps.a[c]), int(ps.b[c]), float(ps.cosine[c]), 0, yaw=float(yaw[0]),
+                                       score=float(ps.verify[c])))
+    return added
 
 
 def _turned_in_between(loops: list, turned: np.ndarray) -> list:

@@ -165,3 +165,21 @@ def test_a_sequence_loop_is_placed_on_the_diagonal_of_the_same_place(monkeypatch
     monkeypatch.setattr(lv, "_PARALLEL_AXIS", -1.0)   # no sequence loop is moved
     ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
     assert ev.fp == 1
+
+
+def test_a_place_passed_a_third_time_is_joined_to_the_first_pass(monkeypatch):
+    """Seed 31's loop route starts a third lap: loops join laps 1-2 and 2-3, and with them
+    the start of lap 3 is also joined to lap 1, where its own evidence alone is moderate."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("loop", "indoor", seed=31), shifts=(True,), input_height=128)
+    descs = case.by_shift[True]
+    topomap = build_map(descs, MapParams())
+    ev = evaluate(topomap, case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 2
+    index = topomap.graph.nodes
+    lags = [index[v]["index"] - index[u]["index"] for u, v, _ in topomap.loops()]
+    assert max(lags) > 1.5 * np.median(lags)   # a loop across two laps
+    monkeypatch.setattr(lv, "_visits_again", lambda *args: [])
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == 1
