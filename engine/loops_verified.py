@@ -77,6 +77,7 @@ from .verify import align_nodes, cumulative_turning, displacement, local_shifts,
 
 SEQ_HALF = 2            # sequence support over 2 * SEQ_HALF + 1 pairs
 NMS_RADIUS = 3          # nodes
+AGAIN_RADIUS = 3        # nodes: how near two loops' ends must be to share a place (step 6)
 # Forward sequence support only between nodes more than this many exclusion widths apart.
 FORWARD_LAG_FACTOR = 4
 # Loose gates for which pairs are verified at all (z units); the real thresholds follow.
@@ -552,14 +553,14 @@ def _visits_again(loops: list, ps: PairScores, node_shifts: np.ndarray, frame_wi
     added: list = []
     for i, (node, n, other) in enumerate(ends):
         for node2, n2, other2 in ends[i + 1:]:
-            if node2 - node > NMS_RADIUS:
+            if node2 - node > AGAIN_RADIUS:
                 break
             p, q = sorted((other, other2))
             if n2 == n or q - p <= exclude:
                 continue
-            if any(abs(lc.a - p) <= NMS_RADIUS and abs(lc.b - q) <= NMS_RADIUS for lc in loops + added):
+            if any(abs(lc.a - p) <= AGAIN_RADIUS and abs(lc.b - q) <= AGAIN_RADIUS for lc in loops + added):
                 continue
-            near = np.flatnonzero((np.abs(ps.a[ok] - p) <= NMS_RADIUS) & (np.abs(ps.b[ok] - q) <= NMS_RADIUS))
+            near = np.flatnonzero((np.abs(ps.a[ok] - p) <= AGAIN_RADIUS) & (np.abs(ps.b[ok] - q) <= AGAIN_RADIUS))
             if near.size == 0:
                 continue
             c = ok[near[np.argmax(strength[near])]]
