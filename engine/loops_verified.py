@@ -501,13 +501,15 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     chosen = select(ps, thresholds)
     yaw = None
     local = None
-    if ps.shift is not None and node_shifts is not None and frame_width > 0:
+    # Column signatures and panorama shifts give every pair a yaw (steps 3-6, the final check).
+    has_yaw = ps.shift is not None and node_shifts is not None and frame_width > 0
+    if has_yaw:
         cols = np.asarray(node_columns, np.float32)
         local = _local_alignment_works(cols)
         if local and chosen.size:
             chosen = _place_on_stretch(ps, chosen, cols, np.asarray(node_shifts), frame_width, exclude,
                                        thresholds)
-    if ps.shift is not None and chosen.size and node_shifts is not None and frame_width > 0:
+    if has_yaw and chosen.size:
         width = np.asarray(node_columns).shape[1]
         yaw = pair_yaw(ps.shift[chosen], width, np.asarray(node_shifts)[ps.a[chosen]],
                        np.asarray(node_shifts)[ps.b[chosen]], frame_width)
@@ -525,10 +527,10 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
-    if ps.shift is not None and node_shifts is not None and frame_width > 0:
+    if has_yaw:
         out += _visits_again(out, ps, np.asarray(node_shifts), frame_width, np.asarray(node_columns).shape[1],
                              exclude, thresholds)
-    if out and node_columns is not None and node_shifts is not None and frame_width > 0:
+    if out and has_yaw:
         out = _turned_in_between(out, cumulative_turning(node_columns, node_shifts, frame_width))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
