@@ -27,7 +27,10 @@ Beyond the paper (see README "beyond the paper"), in six steps and a final check
    diagonal line whose sequence windows overlap (the same evidence counted twice).
    In open spaces a loop with sequence support between parallel passes is then moved to
    whichever of the three parallel diagonals is the stretch itself, as in step 5
-   (``_place_on_stretch``): the strongest pair can be one node off.
+   (``_place_on_stretch``): the strongest pair can be one node off. Last, pairs on the
+   diagonal line of a stronger crossing loop (yaw near 90) within half a run are dropped
+   (``_off_crossing_lines``): along that line both passes are k nodes from the crossing, in
+   different corridors.
 5. Long runs (``run_loops``): a stretch driven twice with a lateral offset matches
    only weakly node by node (near walls are magnified, benchmarks/results/
    offset_analysis.md), but it does so for many nodes in a row. The descriptor's
@@ -97,11 +100,14 @@ SAME_LINE = 2           # runs within this many diagonals of a loop are the same
 LOCAL_STEP_MAX = 2.8
 _MAX_STEPS = 500        # node steps sampled to measure it
 _PARALLEL_AXIS = 30.0   # degrees: a sequence loop this near 0 / 180 is a stretch driven twice (step 4b)
+_CROSSING_AXIS = 45.0   # degrees: a loop further than this from 0 / 180 is a crossing
 # To come back to a place the robot must have turned in between: a full circle (or two
 # U-turns) to pass it the same way again, a U-turn to pass it the other way. Loops whose
 # nodes were joined by a (nearly) straight drive are a street that looks alike along its
-# length. Half of each, as turning measured from consecutive alignments can fall short.
-MIN_TURN_SAME_WAY = 180.0   # degrees between the nodes of a loop with yaw near 0
+# length. Turning measured from consecutive alignments can fall short: three quarters of a
+# circle (true same-way loops on seeds 20-254 measured 302 degrees or more, a false one after a
+# single U-turn 219) and half a U-turn.
+MIN_TURN_SAME_WAY = 270.0   # degrees between the nodes of a loop with yaw near 0
 MIN_TURN_OTHER_WAY = 90.0   # ... and near 180
 _WAY_TOLERANCE = 60.0       # degrees: how near 0 / 180 a loop's yaw must be to be checked
 
@@ -475,6 +481,25 @@ def _place_on_stretch(ps: PairScores, chosen: np.ndarray, cols: np.ndarray, node
     return np.unique(np.asarray(placed, np.int64))
 
 
+def _off_crossing_lines(ps: PairScores, chosen: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Mask of the chosen pairs not on the diagonal line of a stronger crossing loop.
+
+    Pairs along the diagonal line through a 90-degree crossing (yaw far from 0 / 180) are
+    k nodes from the crossing along both corridors, never the same place: a 4-way crossing
+    that looks alike from every side makes such a line (its mirror diagonal). ``select``
+    keeps one pair per line within 2 * SEQ_HALF nodes; next to a crossing the line is
+    dropped over half a run.
+    """
+    strength = np.maximum(ps.z[chosen], ps.seq[chosen]) + ps.verify[chosen]
+    a, b = ps.a[chosen], ps.b[chosen]
+    crossing = np.abs((yaw + 90.0) % 180.0 - 90.0) > _CROSSING_AXIS
+    same_line = ((np.abs((a + b)[:, None] - (a + b)[None, :]) <= 1)
+                 | (np.abs((b - a)[:, None] - (b - a)[None, :]) <= 1))
+    near = np.abs(a[:, None] - a[None, :]) <= RUN_LENGTH // 2
+    stronger_crossing = crossing[None, :] & (strength[None, :] > strength[:, None])
+    return ~np.any(same_line & near & stronger_crossing, axis=1)
+
+
 def _same_stretch(a: int, b: int, sign: int, other, near: int) -> bool:
     """Whether loop ``other`` closes the same place or the same stretch as run (a, b)."""
     if abs(a - other.a) <= near and abs(b - other.b) <= near:
@@ -513,6 +538,8 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         width = np.asarray(node_columns).shape[1]
         yaw = pair_yaw(ps.shift[chosen], width, np.asarray(node_shifts)[ps.a[chosen]],
                        np.asarray(node_shifts)[ps.b[chosen]], frame_width)
+        keep = _off_crossing_lines(ps, chosen, yaw)
+        chosen, yaw = chosen[keep], yaw[keep]
     out = []
     for k, c in enumerate(chosen):
         score = float(ps.verify[c]) if ps.verify is not None else None

@@ -183,3 +183,34 @@ def test_a_place_passed_a_third_time_is_joined_to_the_first_pass(monkeypatch):
     monkeypatch.setattr(lv, "_visits_again", lambda *args: [])
     ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == 1
+
+
+def test_pairs_on_the_diagonal_line_through_a_crossing_are_not_loops(monkeypatch):
+    """Seed 244's 4-way crossing looks alike from every side: a pair 5 nodes along the mirror
+    diagonal through the crossing (6 m away) has sequence support and yaw 180. Next to a
+    stronger crossing loop on its line it is not a place."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("crossing", "outdoor", seed=244, people=4, lighting_drift=0.3, noise=0.01),
+                         shifts=(True,), input_height=128)
+    descs = case.by_shift[True]
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+    monkeypatch.setattr(lv, "_CROSSING_AXIS", 90.0)   # no loop counts as a crossing
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 1
+
+
+def test_one_u_turn_is_not_enough_to_pass_a_place_the_same_way_again(monkeypatch):
+    """Seed 250's offset route has a lone pair just before and after its U-turn whose views
+    face the same way (3.1 m apart): one U-turn (about 200 degrees measured) is not the
+    full circle a same-way pass needs."""
+    import engine.loops_verified as lv
+
+    case = describe_case(Case("offset", "outdoor", seed=250), shifts=(True,), input_height=128)
+    descs = case.by_shift[True]
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 0 and ev.events_found == ev.events_total == 1
+    monkeypatch.setattr(lv, "MIN_TURN_SAME_WAY", 180.0)   # half a circle, as before
+    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    assert ev.fp == 1
