@@ -305,10 +305,16 @@ def _line_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, reach: int)
     for s0 in range(0, a.size, 1024):   # bounded memory on maps with many loops
         s1 = min(a.size, s0 + 1024)
         near = np.abs(a[s0:s1, None] - a[None, :]) <= reach
-        line = ((np.abs((b - a)[s0:s1, None] - (b - a)[None, :]) <= 1)
-                | (np.abs((b + a)[s0:s1, None] - (b + a)[None, :]) <= 1))
+        line = _on_one_line(a[s0:s1], b[s0:s1], a, b)
         keep[s0:s1] = ~np.any(near & line & (strength[None, :] > strength[s0:s1, None]), axis=1)
     return keep
+
+
+def _on_one_line(a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray) -> np.ndarray:
+    """(len(a1), len(a2)) mask: pairs on one diagonal line (forward b - a or backward a + b,
+    within one diagonal)."""
+    return ((np.abs((b1 - a1)[:, None] - (b2 - a2)[None, :]) <= 1)
+            | (np.abs((b1 + a1)[:, None] - (b2 + a2)[None, :]) <= 1))
 
 
 def run_means(z: np.ndarray, length: int, sign: int) -> np.ndarray:
@@ -493,8 +499,7 @@ def _off_crossing_lines(ps: PairScores, chosen: np.ndarray, yaw: np.ndarray) -> 
     strength = np.maximum(ps.z[chosen], ps.seq[chosen]) + ps.verify[chosen]
     a, b = ps.a[chosen], ps.b[chosen]
     crossing = np.abs((yaw + 90.0) % 180.0 - 90.0) > _CROSSING_AXIS
-    same_line = ((np.abs((a + b)[:, None] - (a + b)[None, :]) <= 1)
-                 | (np.abs((b - a)[:, None] - (b - a)[None, :]) <= 1))
+    same_line = _on_one_line(a, b, a, b)
     near = np.abs(a[:, None] - a[None, :]) <= RUN_LENGTH // 2
     stronger_crossing = crossing[None, :] & (strength[None, :] > strength[:, None])
     return ~np.any(same_line & near & stronger_crossing, axis=1)
