@@ -310,6 +310,17 @@ def _line_maxima(a: np.ndarray, b: np.ndarray, strength: np.ndarray, reach: int)
     return keep
 
 
+def _off_parallel(yaw: np.ndarray) -> np.ndarray:
+    """Degrees from the nearest of 0 / 180: 0 for parallel passes, 90 for a crossing."""
+    return np.abs((np.asarray(yaw) + 90.0) % 180.0 - 90.0)
+
+
+def _pair_yaws(ps: PairScores, index: np.ndarray, node_shifts: np.ndarray, width: int,
+               frame_width: int) -> np.ndarray:
+    """``pair_yaw`` of the candidate pairs ``ps[index]``."""
+    return pair_yaw(ps.shift[index], width, node_shifts[ps.a[index]], node_shifts[ps.b[index]], frame_width)
+
+
 def _on_one_line(a1: np.ndarray, b1: np.ndarray, a2: np.ndarray, b2: np.ndarray) -> np.ndarray:
     """(len(a1), len(a2)) mask: pairs on one diagonal line (forward b - a or backward a + b,
     within one diagonal)."""
@@ -445,7 +456,7 @@ def run_loops(z: np.ndarray, node_colours: np.ndarray, node_columns: np.ndarray,
         # Parallel passes: the yaw's axis along the run is near 0 / 180 degrees. Only the axis
         # counts, since a corridor looks alike both ways (column alignment may flip it); the
         # diagonal tells the direction. A 90-degree crossing fails here.
-        off = np.abs((yaw + 90.0) % 180.0 - 90.0)
+        off = _off_parallel(yaw)
         # ... but a run whose yaw all but never agrees with the diagonal's direction (the
         # alignment is sure the passes went the same way) is two different streets.
         heading = 180.0 if sign == -1 else 0.0
@@ -472,12 +483,10 @@ def _place_on_stretch(ps: PairScores, chosen: np.ndarray, cols: np.ndarray, node
     pair that has sequence support itself (a candidate of ``ps``).
     """
     where = {(int(a), int(b)): n for n, (a, b) in enumerate(zip(ps.a, ps.b))}
-    yaw = pair_yaw(ps.shift[chosen], cols.shape[1], node_shifts[ps.a[chosen]], node_shifts[ps.b[chosen]],
-                   frame_width)
+    yaw = _pair_yaws(ps, chosen, node_shifts, cols.shape[1], frame_width)
     placed = []
-    for c, pair_yaw_deg in zip(chosen, yaw):
+    for c, pair_yaw_deg, off_axis in zip(chosen, yaw, _off_parallel(yaw)):
         a, b = int(ps.a[c]), int(ps.b[c])
-        off_axis = abs((pair_yaw_deg + 90.0) % 180.0 - 90.0)
         if ps.seq[c] < th.seq_z or off_axis > _PARALLEL_AXIS:
             placed.append(c)
             continue
@@ -498,7 +507,7 @@ def _off_crossing_lines(ps: PairScores, chosen: np.ndarray, yaw: np.ndarray) -> 
     """
     strength = np.maximum(ps.z[chosen], ps.seq[chosen]) + ps.verify[chosen]
     a, b = ps.a[chosen], ps.b[chosen]
-    crossing = np.abs((yaw + 90.0) % 180.0 - 90.0) > _CROSSING_AXIS
+    crossing = _off_parallel(yaw) > _CROSSING_AXIS
     same_line = _on_one_line(a, b, a, b)
     near = np.abs(a[:, None] - a[None, :]) <= RUN_LENGTH // 2
     stronger_crossing = crossing[None, :] & (strength[None, :] > strength[:, None])
@@ -535,14 +544,12 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     has_yaw = ps.shift is not None and node_shifts is not None and frame_width > 0
     if has_yaw:
         cols = np.asarray(node_columns, np.float32)
+        shifts = np.asarray(node_shifts)
         local = _local_alignment_works(cols)
         if local and chosen.size:
-            chosen = _place_on_stretch(ps, chosen, cols, np.asarray(node_shifts), frame_width, exclude,
-                                       thresholds)
+            chosen = _place_on_stretch(ps, chosen, cols, shifts, frame_width, exclude, thresholds)
     if has_yaw and chosen.size:
-        width = np.asarray(node_columns).shape[1]
-        yaw = pair_yaw(ps.shift[chosen], width, np.asarray(node_shifts)[ps.a[chosen]],
-                       np.asarray(node_shifts)[ps.b[chosen]], frame_width)
+        yaw = _pair_yaws(ps, chosen, shifts, cols.shape[1], frame_width)
         keep = _off_crossing_lines(ps, chosen, yaw)
         chosen, yaw = chosen[keep], yaw[keep]
     out = []
@@ -550,20 +557,17 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
         score = float(ps.verify[c]) if ps.verify is not None else None
         out.append(LoopCandidate(int(ps.a[c]), int(ps.b[c]), float(ps.cosine[c]), 0,
                                  yaw=None if yaw is None else float(yaw[k]), score=score))
-    if (params.long_runs and node_colours is not None and node_columns is not None
-            and node_shifts is not None and frame_width > 0):
+    if params.long_runs and node_colours is not None and has_yaw:
         v = np.asarray(node_vectors, np.float32)
         near = RUN_LENGTH // 2   # one loop per stretch: skip runs whose place is already closed
-        runs = run_loops(ps.z_matrix, node_colours, node_columns, np.asarray(node_shifts), frame_width,
-                         exclude, thresholds, local)
+        runs = run_loops(ps.z_matrix, node_colours, node_columns, shifts, frame_width, exclude, thresholds, local)
         for a, b, strength, run_yaw, sign in runs:
             if not any(_same_stretch(a, b, sign, lc, near) for lc in out):
                 out.append(LoopCandidate(a, b, float(v[a] @ v[b]), 0, yaw=run_yaw, score=strength))
     if has_yaw:
-        out += _visits_again(out, ps, np.asarray(node_shifts), frame_width, np.asarray(node_columns).shape[1],
-                             exclude, thresholds)
-    if out and has_yaw:
-        out = _turned_in_between(out, cumulative_turning(node_columns, node_shifts, frame_width))
+        out += _visits_again(out, ps, shifts, frame_width, cols.shape[1], exclude, thresholds)
+        if out:
+            out = _turned_in_between(out, cumulative_turning(cols, shifts, frame_width))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
 
@@ -598,8 +602,7 @@ def _visits_again(loops: list, ps: PairScores, node_shifts: np.ndarray, frame_wi
             if near.size == 0:
                 continue
             c = ok[near[np.argmax(strength[near])]]
-            yaw = pair_yaw(ps.shift[c:c + 1], width, node_shifts[ps.a[c:c + 1]], node_shifts[ps.b[c:c + 1]],
-                           frame_width)
+            yaw = _pair_yaws(ps, np.array([c]), node_shifts, width, frame_width)
             added.append(LoopCandidate(int(ps.a[c]), int(ps.b[c]), float(ps.cosine[c]), 0, yaw=float(yaw[0]),
                                        score=float(ps.verify[c])))
     return added
