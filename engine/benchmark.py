@@ -114,6 +114,10 @@ class Row:
     events_total: int
     extraction_fps: float
     people: int = 0
+    family: str = "synth"
+    candidates: int = 0              # undecided candidates in the map (two-tier methods)
+    false_candidates: int = 0        # of them, not the same place (or temporal neighbours)
+    events_with_candidates: int = 0  # revisit events found by an auto loop or a candidate
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -135,12 +139,20 @@ def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
         shift = method in SHIFTED_METHODS or method not in ("simple",)
         descs = described.by_shift[shift]
         topomap = build_map(descs, p)
-        ev = evaluate(topomap, described.poses, neighbor_node_num=eval_nn)
-        rows.append(Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
-                        ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
-                        ev.events_total, float(described.frames_per_second.get(shift, 0.0)),
-                        case.people))
+        rows.append(score_map(topomap, described.poses, case, method, eval_nn,
+                              float(described.frames_per_second.get(shift, 0.0))))
     return rows
+
+
+def score_map(topomap, poses: Poses, case, method: str, eval_nn: int = 5, fps: float = 0.0) -> Row:
+    """One results row: the exported map's metrics, plus what the candidate tier adds."""
+    ev = evaluate(topomap, poses, neighbor_node_num=eval_nn)
+    with_cand = evaluate(topomap, poses, neighbor_node_num=eval_nn, include_candidates=True)
+    cands = len(topomap.loops(("candidate",)))
+    return Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
+               ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
+               ev.events_total, fps, getattr(case, "people", 0), getattr(case, "family", "synth"),
+               cands, with_cand.fp - ev.fp, with_cand.events_found)
 
 
 PAPER_METHODS = ("simple", "shift-simple", "ours")
@@ -174,7 +186,9 @@ def evaluate_route(route: str, look: str, seed: int = 0, methods: Iterable[str] 
 def sum_rows(rows: list[Row], method: str) -> dict:
     """Totals over rows of one method (pair counts, events) with ratios recomputed."""
     sel = [r for r in rows if r.method == method]
-    tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total")}
+    tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total",
+                                                        "candidates", "false_candidates",
+                                                        "events_with_candidates")}
     tp, fp, fn = tot["tp"], tot["fp"], tot["fn"]
     tot["precision"] = tp / (tp + fp) if tp + fp else 0.0
     tot["recall"] = tp / (tp + fn) if tp + fn else 0.0

@@ -41,7 +41,7 @@ from . import __version__
 from .descriptors.base import Descriptors
 from .errors import InputError
 from .loops import LoopCandidate
-from .params import MapParams
+from .params import PARAMETERS, MapParams
 
 STATUSES = ("auto", "candidate", "confirmed", "rejected", "manual")
 SETTABLE_STATUSES = ("auto", "candidate", "confirmed", "rejected")
@@ -55,9 +55,9 @@ _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
                "confidence": float}
 EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "confidence")
-_GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
-                "node_sim_th": float, "loop_sim_th": float, "window_size": int,
-                "count_th": int, "neighbor_node_num": int, "interval": float, "long_runs": int}
+# Graph attributes: every map parameter with its declared type (bools stored as 0/1).
+_GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
+                **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}
 
 
 def _plain(value, kind=None):

@@ -161,7 +161,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
 
     if len(descs) == 0:
         raise InputError("no descriptors to map")
-    if params.method == "verified" and params.node_sim_th is None:
+    if params.method in ("verified", "verified-rules") and params.node_sim_th is None:
         from .calibrate import node_threshold
 
         params = replace(params, node_sim_th=node_threshold(descs.vectors))
@@ -171,13 +171,21 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
                          f"{'without' if not params.uses_shift else 'with'} --no-shift")
     node_rows = make_nodes(descs.vectors, p.node_sim_th)
+    columns = None if descs.columns is None else descs.columns[node_rows]
+    frame_width = int(descs.meta.get("frame_width", 0))
     if p.method == "verified":
+        from .loop_closure import detect_loops as verified
+
+        loops = verified(descs.vectors[node_rows], p, node_rows=node_rows,
+                         features=getattr(descs, "features", None), columns=columns,
+                         shifts=descs.shifts[node_rows], frame_width=frame_width,
+                         cache=descs.cache.setdefault(("nodes", p.node_sim_th), {}))
+    elif p.method == "verified-rules":
         from .loops_verified import verified_loops
 
-        columns = None if descs.columns is None else descs.columns[node_rows]
         colours = None if descs.colours is None else descs.colours[node_rows]
         loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
-                               int(descs.meta.get("frame_width", 0)), node_colours=colours)
+                               frame_width, node_colours=colours)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}

@@ -178,7 +178,8 @@ PARAMS_USED = {
     "simple": {"node_sim_th", "loop_sim_th"},
     "shift-simple": {"node_sim_th", "loop_sim_th"},
     "ours": {"node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"},
-    "verified": {"node_sim_th", "neighbor_node_num", "long_runs"},
+    "verified": {"node_sim_th", "neighbor_node_num"},
+    "verified-rules": {"node_sim_th", "neighbor_node_num", "long_runs"},
 }
 
 

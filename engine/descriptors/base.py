@@ -34,6 +34,9 @@ class Descriptors:
     meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
     columns: Optional[np.ndarray] = None  # float16 (n, W', F) column signatures, when computed
     colours: Optional[np.ndarray] = None  # float16 (n, 512) horizon-band colour histograms, when computed
+    # Derived results kept in memory (retrieval, background statistics, geometry per frame
+    # pair), so that re-mapping after a threshold change is cheap; never saved.
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
