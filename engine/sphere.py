@@ -142,12 +142,20 @@ def _kabsch(a: np.ndarray, b: np.ndarray, w: Optional[np.ndarray] = None) -> np.
     return u @ vt
 
 
+_MINORS = np.array([[j for j in range(9) if j != k] for k in range(9)])
+_COFACTOR_SIGNS = (-1.0) ** np.arange(9)
+
+
 def _essential_fit(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Essential matrices (h, 3, 3) by the linear 8-point method on (h, k, 3) bearings (k >= 8)."""
     rows = (b[..., :, None] * a[..., None, :]).reshape(a.shape[0], a.shape[1], 9)   # b^T E a = rows . vec(E)
-    _, _, vt = np.linalg.svd(rows, full_matrices=True)
-    e = vt[:, -1, :].reshape(-1, 3, 3)
-    u, _, vt3 = np.linalg.svd(e)
+    if rows.shape[1] == 8:
+        # The null vector of 8 rows in 9-D is their generalised cross product (signed 8 x 8
+        # minors): ~2.5 times faster than a batched SVD for the minimal samples.
+        e = np.linalg.det(rows[:, :, _MINORS].transpose(0, 2, 1, 3)) * _COFACTOR_SIGNS
+    else:
+        e = np.linalg.svd(rows, full_matrices=True)[2][:, -1, :]
+    u, _, vt3 = np.linalg.svd(e.reshape(-1, 3, 3))
     return u @ (np.array([1.0, 1.0, 0.0])[None, :, None] * vt3)      # two equal singular values
 
 
@@ -157,28 +165,38 @@ def _outer(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (x[:, :, None] * y[:, None, :]).reshape(-1, 9)
 
 
-def _rotation_errors(r: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Chord |R a - b| (h, m) (~ the angle for small ones): |R a - b|^2 = 2 - 2 b^T R a."""
-    dot = (_outer(b, a) @ r.reshape(-1, 9).T).T
+def _rotation_errors(r: np.ndarray, ba: np.ndarray) -> np.ndarray:
+    """Chord |R a - b| (h, m) (~ the angle for small ones): |R a - b|^2 = 2 - 2 b^T R a;
+    ``ba`` = ``_outer(b, a)``."""
+    dot = (ba @ r.reshape(-1, 9).T).T
     return np.sqrt(np.maximum(2.0 - 2.0 * dot, 0.0))
 
 
-def _epipolar_errors(e: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def _epipolar_errors(e: np.ndarray, ba: np.ndarray, aa: np.ndarray, bb: np.ndarray) -> np.ndarray:
     """Sine of the larger angle (h, m) of b from a's epipolar great circle and of a from b's:
-    |b^T E a| / |E a| and |b^T E a| / |E^T b|."""
-    r = _outer(b, a) @ e.reshape(-1, 9).T                                      # (m, h)
-    ea2 = _outer(a, a) @ np.matmul(e.transpose(0, 2, 1), e).reshape(-1, 9).T  # |E a|^2
-    eb2 = _outer(b, b) @ np.matmul(e, e.transpose(0, 2, 1)).reshape(-1, 9).T  # |E^T b|^2
+    |b^T E a| / |E a| and |b^T E a| / |E^T b| (``ba``, ``aa``, ``bb``: ``_outer`` of the bearings)."""
+    r = ba @ e.reshape(-1, 9).T                                      # (m, h)
+    ea2 = aa @ np.matmul(e.transpose(0, 2, 1), e).reshape(-1, 9).T  # |E a|^2
+    eb2 = bb @ np.matmul(e, e.transpose(0, 2, 1)).reshape(-1, 9).T  # |E^T b|^2
     return (np.abs(r) / np.sqrt(np.maximum(np.minimum(ea2, eb2), 1e-24))).T
 
 
 def _samples(rng: np.random.Generator, h: int, m: int, k: int) -> np.ndarray:
-    """``h`` draws of ``k`` distinct indices of ``m`` (h, k)."""
-    return np.argpartition(rng.random((h, m)), k - 1, axis=1)[:, :k]
+    """``h`` draws of ``k`` distinct indices of ``m`` (h, k): rows with a repeat are drawn again."""
+    if m < 4 * k:   # repeats would be common: rank random keys instead
+        return np.argpartition(rng.random((h, m)), k - 1, axis=1)[:, :k]
+    idx = rng.integers(0, m, (h, k))
+    while True:
+        s = np.sort(idx, axis=1)
+        bad = np.flatnonzero((s[:, 1:] == s[:, :-1]).any(axis=1))
+        if bad.size == 0:
+            return idx
+        idx[bad] = rng.integers(0, m, (bad.size, k))
 
 
 def _ransac(a, b, rng, k, draws, fit, errors, threshold):
-    """Best model of ``fit`` (minimal samples of ``k``), then refined on its inliers."""
+    """Best model of ``fit`` (minimal samples of ``k``), then refined on its inliers.
+    ``errors(models)`` gives (h, m) errors of all matches."""
     m = a.shape[0]
     best_model, best_mask, best_count, done = None, np.zeros(m, bool), -1, 0
     needed = draws
@@ -186,7 +204,7 @@ def _ransac(a, b, rng, k, draws, fit, errors, threshold):
         h = min(BATCH, draws - done)
         idx = _samples(rng, h, m, k)
         models = fit(a[idx], b[idx])
-        inl = errors(models, a, b) < threshold
+        inl = errors(models) < threshold
         counts = inl.sum(axis=1)
         j = int(np.argmax(counts))
         if counts[j] > best_count:
@@ -199,7 +217,7 @@ def _ransac(a, b, rng, k, draws, fit, errors, threshold):
         if best_count < k:
             break
         model = fit(a[best_mask][None], b[best_mask][None])
-        inl = errors(model, a, b)[0] < threshold
+        inl = errors(model)[0] < threshold
         if inl.sum() < best_count:
             break
         best_model, best_mask, best_count = model[0], inl, int(inl.sum())
@@ -246,8 +264,11 @@ def two_view(fa: LocalFeatures, fb: LocalFeatures, seed: int = 0) -> TwoView:
         return none
     a, b = bearings(uv_a), bearings(uv_b)
     rng = np.random.default_rng(seed)
-    rot, rot_mask, rot_n = _ransac(a, b, rng, 2, ROTATION_DRAWS, _kabsch, _rotation_errors, THRESHOLD)
-    ess, ess_mask, ess_n = _ransac(a, b, rng, 8, ESSENTIAL_DRAWS, _essential_fit, _epipolar_errors, THRESHOLD)
+    ba, aa, bb = _outer(b, a), _outer(a, a), _outer(b, b)
+    rot, rot_mask, rot_n = _ransac(a, b, rng, 2, ROTATION_DRAWS, _kabsch,
+                                   lambda r: _rotation_errors(r, ba), THRESHOLD)
+    ess, ess_mask, ess_n = _ransac(a, b, rng, 8, ESSENTIAL_DRAWS, _essential_fit,
+                                   lambda e: _epipolar_errors(e, ba, aa, bb), THRESHOLD)
     if rot_n >= ROTATION_SHARE * ess_n:
         model, mask, r, t = "rotation", rot_mask, rot, None
     else:
