@@ -211,7 +211,10 @@ def _ransac(a, b, rng, k, draws, fit, errors, threshold):
             best_model, best_mask, best_count = models[j], inl[j], int(counts[j])
             w = best_count / m
             fail = 1.0 - w ** k
-            needed = 0 if fail <= 0 else int(np.ceil(np.log(1.0 - CONFIDENCE) / np.log(max(fail, 1e-12))))
+            if fail <= 0.0:
+                needed = 0
+            elif fail < 1.0:
+                needed = int(min(draws, np.ceil(np.log(1.0 - CONFIDENCE) / np.log(fail))))
         done += h
     for _ in range(REFINE_STEPS):   # least squares on all inliers usually gains a few
         if best_count < k:
