@@ -26,6 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from engine import descriptors  # noqa: E402
 from engine.features import LocalFeatures, extract  # noqa: E402
 from engine.frames import Frame  # noqa: E402
 from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
@@ -66,6 +67,11 @@ def synthetic_pair(rng, outliers, n=400):
 def costs(repeat):
     pano = cv2.cvtColor(cv2.imread(str(ROOT / "tests/data/examplepano_1024.jpg")), cv2.COLOR_BGR2RGB)
     print(f"extract, 1024x512 frame: {timed(lambda: extract(pano), repeat):.1f} ms ({len(extract(pano))} features)")
+    # The default descriptor on the same frames, same machine and moment, for scale.
+    model = descriptors.get(descriptors.DEFAULT_DESCRIPTOR)
+    batch = [np.roll(pano, 37 * i, axis=1) for i in range(16)]
+    ms = timed(lambda: model.describe(iter(batch), count=len(batch)), max(1, repeat // 5)) / len(batch)
+    print(f"{descriptors.DEFAULT_DESCRIPTOR} describe, 1024x512 frame: {ms:.1f} ms")
     fa = extract(pano)
     pairs = {"rolled real panorama": (fa, extract(np.roll(pano, 123, axis=1)))}
     rng = np.random.default_rng(0)
