@@ -51,6 +51,7 @@ def describe(
     """
     from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
+    from .features import FEATURES_VERSION
     from .verify import COLUMNS_VERSION
 
     path = Path(path)
@@ -64,7 +65,7 @@ def describe(
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
-                         **model.settings()})
+                         "features": FEATURES_VERSION, **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
@@ -92,9 +93,11 @@ def describe_frames(
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
     (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
-    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset.
+    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset,
+    and the local features of each shifted frame (``Descriptors.features``) for two-view geometry.
     """
     from .colour import colour_histogram
+    from .features import FeatureTable, extract
     from .shift import apply_shift, canonical_shift
     from .verify import column_features
 
@@ -105,6 +108,7 @@ def describe_frames(
     shifts: list[int] = []
     columns: list[np.ndarray] = []
     colours: list[np.ndarray] = []
+    features: list = []
     frame_width: list[int] = []
 
     def shifted_images() -> Iterator[np.ndarray]:
@@ -117,6 +121,7 @@ def describe_frames(
             rgb = apply_shift(frame.rgb, s) if s else frame.rgb
             columns.append(column_features(rgb))
             colours.append(colour_histogram(rgb))
+            features.append(extract(rgb))
             if not frame_width:
                 frame_width.append(int(frame.rgb.shape[1]))
             yield rgb
@@ -142,6 +147,7 @@ def describe_frames(
         meta=meta,
         columns=np.stack(columns).astype(np.float16) if columns else None,
         colours=np.stack(colours).astype(np.float16) if colours else None,
+        features=FeatureTable.from_list(features) if features else None,
     )
 
 
