@@ -44,6 +44,8 @@ class Plan:
     indoor: bool
     ops: list = field(default_factory=list)
     zones: list = field(default_factory=list)
+    _raster: object = field(default=None, repr=False, compare=False)   # (ops drawn, mask, origin)
+    _eroded: dict = field(default_factory=dict, repr=False, compare=False)
 
     def corridor(self, points, width: float) -> "Plan":
         self.ops.append(("line", np.asarray(points, float), float(width), 1))
@@ -74,6 +76,12 @@ class Plan:
 
     def raster(self) -> tuple[np.ndarray, tuple[float, float]]:
         """The free-space mask (uint8 0/1, row = y) and the metric position of cell (0, 0)."""
+        key = len(self.ops)
+        if self._raster is None or self._raster[0] != key:
+            self._raster = (key, *self._draw())
+        return self._raster[1], self._raster[2]
+
+    def _draw(self) -> tuple[np.ndarray, tuple[float, float]]:
         x0, y0, x1, y1 = self.bounds()
         w, h = int(np.ceil((x1 - x0) / RES)), int(np.ceil((y1 - y0) / RES))
         mask = np.zeros((h, w), np.uint8)
@@ -127,7 +135,10 @@ class Plan:
         mask, (x0, y0) = self.raster()
         if clearance > 0:
             r = int(np.ceil(clearance / RES))
-            mask = cv2.erode(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))
+            if (len(self.ops), r) not in self._eroded:
+                self._eroded = {(len(self.ops), r): cv2.erode(
+                    mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)))}
+            mask = self._eroded[(len(self.ops), r)]
         ij = np.floor((np.asarray(pts) - (x0, y0)) / RES).astype(int)
         ok = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < mask.shape[1]) & (ij[:, 1] < mask.shape[0])
         out = np.zeros(len(ij), bool)

@@ -12,6 +12,7 @@ cast), so that distinct places look distinct while every surface stays a photogr
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import cv2
@@ -36,13 +37,16 @@ SKY = "sky"
 OBJECTS = ("person", "bin")
 
 
+@lru_cache(maxsize=32)
 def load_crop(name: str) -> np.ndarray:
-    """One shipped crop as RGB uint8; a missing file is an InputError naming it."""
+    """One shipped crop as RGB uint8 (read-only, cached); a missing file is an InputError."""
     path = TEXTURE_DIR / f"{name}.jpg"
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         raise InputError(f"texture crop {path} is missing or unreadable")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    rgb = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    rgb.setflags(write=False)
+    return rgb
 
 
 def _variant(img: np.ndarray, rng: np.random.Generator, strength: float) -> np.ndarray:
@@ -86,10 +90,12 @@ def build_atlas(tiles: list[np.ndarray], names: list[str]) -> Atlas:
             levels.extend(padded)
         else:
             # Blur each tile as a repeating pattern (wrap), then keep the padded window.
+            # Blur each tile as a repeating pattern: wrap-pad by the kernel's reach (3 sigma).
+            pad = int(np.ceil(3 * sigma)) + MARGIN
             for t in tiles:
-                big = np.pad(t, ((TILE_H, TILE_H), (TILE_W, TILE_W), (0, 0)), mode="wrap")
+                big = np.pad(t, ((pad, pad), (pad, pad), (0, 0)), mode="wrap")
                 big = cv2.GaussianBlur(big, (0, 0), sigma)
-                levels.append(big[TILE_H - MARGIN:2 * TILE_H + MARGIN, TILE_W - MARGIN:2 * TILE_W + MARGIN])
+                levels.append(big[pad - MARGIN:pad + TILE_H + MARGIN, pad - MARGIN:pad + TILE_W + MARGIN])
     return Atlas(np.ascontiguousarray(np.concatenate(levels, 0)), list(names))
 
 
