@@ -47,12 +47,15 @@ def test_frames_are_2to1_uint8_photographic_and_poses_match(route):
 
 @pytest.mark.parametrize("seed", [0, 1])
 @pytest.mark.parametrize("route", ROUTES)
-def test_routes_are_smooth_and_pass_their_revisits_twice(route, seed):
+def test_routes_are_smooth_clear_of_walls_and_pass_their_revisits_twice(route, seed):
     p = poses_for(route, seed)
     assert 150 <= len(p) <= 400          # 1 frame per 0.8 m
     step = np.hypot(np.diff(p.x), np.diff(p.y))
     assert step.max() <= 0.8 + 1e-9
     assert np.abs(np.diff(p.yaw)).max() <= np.radians(46)
+    # The robot keeps 0.3 m from every wall (it drives through doors, not walls) ...
+    plan = route_spec(route, seed).plan
+    assert plan.free_at(np.stack([p.x, p.y], 1), clearance=0.3).all()
     for px, py in revisits_for(route, seed):
         near = np.flatnonzero(np.hypot(p.x - px, p.y - py) < 1.0)
         assert near.size and p.t[near].max() - p.t[near].min() > 10.0, (route, px, py)
@@ -157,6 +160,11 @@ def test_things_move_between_laps_and_stay_within_a_lap():
     world = _world("block_laps", 0)
     th = world.things
     assert th.size.size > 0
+    # ... and nothing stands on its path.
+    p = poses_for("block_laps", 0)
+    placed = th.pos[~np.isnan(th.pos[..., 0])]
+    gap = np.hypot(placed[:, None, 0] - p.x[None], placed[:, None, 1] - p.y[None]).min()
+    assert gap >= 0.7 - 1e-9
     moved = ~np.all(np.isclose(th.pos[0], th.pos[1], equal_nan=True), axis=1)
     assert moved.any()
     k = int(np.flatnonzero(moved)[0])

@@ -119,8 +119,9 @@ def reverse(rng: np.random.Generator) -> RouteSpec:
         p.rect(door, -0.1, door + dw, y0 + 0.1)                   # door into the corridor
         doors.append(door + dw / 2)
         if i < n - 1:                                            # door to the next room
-            dy = y0 + rng.uniform(1.0, depth - 2.0)
-            p.rect(x0 + rw - wall - 0.1, dy, x0 + rw + 0.1, dy + 1.1)
+            # The last one is where the route turns round: centred on the route's line.
+            dy = y0 + (depth / 2 - 0.6 if i == n - 2 else rng.uniform(1.0, depth - 2.0))
+            p.rect(x0 + rw - wall - 0.1, dy, x0 + rw + 0.1, dy + 1.2)
     # Rooms 1 and n-3 are the same room (same walls and pictures): a deliberate look-alike.
     for i in (1, n - 3):
         x0 = i * rw
