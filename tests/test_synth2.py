@@ -212,3 +212,19 @@ def test_bad_arguments_raise_input_error():
         make_recording("junction", width=63)
     with pytest.raises(InputError):
         poses_for("junction", fps=0.0)
+
+
+def test_recordings_are_written_by_the_first_familys_writers(tmp_path):
+    import csv
+
+    import cv2
+
+    from engine.synth import write_recording
+
+    rec = make_recording("reverse", seed=0, width=W, max_frames=3)
+    out = write_recording(rec, tmp_path, formats=("folder", "poses"))
+    images = sorted(p for p in out["folder"].iterdir() if p.suffix in (".png", ".jpg"))
+    assert len(images) == 3
+    assert cv2.imread(str(images[0])).shape == (W // 2, W, 3)
+    with open(out["poses"]) as f:
+        assert len(list(csv.reader(f))) >= 3

@@ -15,7 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 RADIUS = 1.5             # m: tight but drivable for a small robot; fits a 3 m corridor
-MAX_ARC_TURN = np.radians(150.0)
+# Sharper turns than this are made on the spot: the arc of a sharper turn would need tangent
+# points far back in both streets and cut through the wedge of wall between them.
+MAX_ARC_TURN = np.radians(100.0)
 SPIN_RATE = np.radians(45.0)   # rad/s on the spot: slow enough to keep frames apart by 45 deg at 1 fps
 
 

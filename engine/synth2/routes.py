@@ -101,8 +101,8 @@ def offset_return(rng: np.random.Generator) -> RouteSpec:
 
 
 def reverse(rng: np.random.Generator) -> RouteSpec:
-    n = int(rng.integers(9, 11))
-    rw = rng.uniform(5.0, 6.0)               # room width along the corridor
+    n = int(rng.integers(10, 12))
+    rw = rng.uniform(5.5, 6.5)               # room width along the corridor
     depth = rng.uniform(4.5, 5.5)
     w1, w2 = rng.uniform(1.6, 2.2), rng.uniform(2.4, 3.2)
     length = n * rw
