@@ -5,7 +5,7 @@ One ``Camera`` per recording, drawn from the seed (``Camera.draw``): a height of
 horizon waves once around the panorama, and turns with the robot), exposure drifting slowly
 (+-15 %) and jumping by up to +-25 % at each lap, white balance drifting +-6 % per channel and
 jumping at laps, horizontal motion blur from turning during a 1/60-1/10 s exposure, a
-stitching seam (the two lenses' halves differ by a few per cent in gain and one pixel row,
+stitching seam (the two lenses' halves differ by up to 7 % per channel in gain and one pixel row,
 at a column fixed in the camera), sensor noise and JPEG compression at quality 55-90.
 ``Camera.plain`` has none of these, for tests of the geometry.
 """
@@ -54,7 +54,7 @@ class Camera:
             wb_drift=tuple(float(v) for v in rng.uniform(0.0, 0.06, 3)),
             lap_gain=lap_gain, lap_wb=lap_wb,
             seam_col=float(rng.uniform(0, 0.5)),
-            seam_gain=tuple(float(v) for v in rng.uniform(0.9, 1.08, 3)),
+            seam_gain=tuple(float(v) for v in rng.uniform(0.93, 1.07, 3)),
             seam_rows=int(rng.integers(0, 2)) or 1,
             noise=float(rng.uniform(1.0, 3.0)), jpeg_quality=int(rng.integers(55, 91)),
             phase=float(rng.uniform(0, 2 * np.pi)))
