@@ -226,3 +226,50 @@ def markdown_table(rows: list[Row]) -> str:
 
 def rows_json(rows: list[Row]) -> str:
     return json.dumps([r.as_dict() for r in rows], indent=1)
+
+
+def random_walk_descriptors(n: int, d: int = 1024, seed: int = 0, revisit_share: float = 0.3,
+                            noise: float = 0.6) -> tuple[np.ndarray, np.ndarray]:
+    """(n, d) L2-normalised descriptors that look like a recording, and where they revisit.
+
+    A smooth walk on the unit sphere (a heading with momentum, consecutive cosine about
+    0.97, about 20 steps to forget a place) around a shared mean direction (so unrelated
+    places still have cosine about 0.3, as real descriptors do). About ``revisit_share``
+    of the rows are stretches (20 to 300 rows) of earlier rows driven again forward or in
+    reverse, each row a noisy copy (``noise`` 0.6: cosine about 0.9 to its original);
+    the walk then goes on from there. ``origin[i]`` is the earlier row that row i
+    revisits, -1 for new ground. For benchmarks and tests of retrieval at any n.
+    """
+    rng = np.random.default_rng(seed)
+    walk = np.empty((n, d), np.float32)
+    origin = np.full(n, -1, np.int64)
+    mean_dir = rng.standard_normal(d).astype(np.float32)
+    mean_dir /= np.linalg.norm(mean_dir)
+    x = rng.standard_normal(d).astype(np.float32)
+    x /= np.linalg.norm(x)
+    heading = rng.standard_normal(d).astype(np.float32) / np.sqrt(d)
+    i = 0
+    while i < n:
+        if i > 400 and rng.random() < revisit_share / (1 - revisit_share) * 100 / 160:
+            length = int(min(n - i, rng.integers(20, 300)))
+            sign = 1 if rng.random() < 0.5 else -1
+            start = int(rng.integers(0, i - length)) if i - length > 0 else 0
+            src = start + np.arange(length) if sign == 1 else start + length - 1 - np.arange(length)
+            src = np.clip(src, 0, i - 1)
+            noisy = walk[src] + noise * rng.standard_normal((length, d)).astype(np.float32) / np.sqrt(d)
+            walk[i:i + length] = noisy / np.linalg.norm(noisy, axis=1, keepdims=True)
+            origin[i:i + length] = src
+            x = walk[src[-1]].copy()
+            i += length
+        length = int(min(n - i, rng.integers(50, 150)))
+        g = rng.standard_normal((length, d)).astype(np.float32) / np.sqrt(d)
+        for t in range(length):
+            heading = 0.8 * heading + 0.6 * g[t]
+            heading /= np.linalg.norm(heading)
+            x = x + 0.25 * heading
+            x /= np.linalg.norm(x)
+            walk[i + t] = x
+        i += length
+    out = walk + 0.65 * mean_dir[None, :]
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    return out.astype(np.float32), origin

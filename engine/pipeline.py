@@ -152,11 +152,21 @@ def describe_frames(
 
 
 def descriptor_defaults(descs: Descriptors) -> dict:
-    """The calibrated thresholds for the descriptor that made ``descs``."""
+    """The calibrated thresholds for the descriptor that made ``descs``.
+
+    Stored defaults first, then the registered model's; descriptors of a model this
+    project does not know (an .npz from any other model) get thresholds calibrated from
+    the recording itself (``engine.calibrate.paper_thresholds``, sampled, fine at 100k
+    rows), with the default temporal window of MapParams.
+    """
     if descs.meta.get("defaults"):
         return dict(descs.meta["defaults"])
     name = descs.meta.get("descriptor", descriptor_registry.DEFAULT_DESCRIPTOR)
-    return descriptor_registry.defaults_for(name)
+    if name in descriptor_registry.REGISTRY:
+        return descriptor_registry.defaults_for(name)
+    from .calibrate import paper_thresholds
+
+    return paper_thresholds(descs.vectors, MapParams().neighbor_node_num)
 
 
 def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = ""):
