@@ -61,6 +61,14 @@ def recall_at_k(found: np.ndarray, truth: np.ndarray) -> float:
     return float(np.mean([len(set(f) & set(t)) / len(t) for f, t in zip(found, truth)]))
 
 
+def revisits_found(neigh, origin: np.ndarray, tolerance: int = 2) -> float:
+    """Share of revisiting rows with a neighbour within ``tolerance`` rows of the row they revisit."""
+    rows = np.flatnonzero(origin >= 0)
+    idx = neigh.index[rows]
+    near = (np.abs(idx - origin[rows][:, None]) <= tolerance) & (idx >= 0)
+    return float(np.mean(near.any(axis=1))) if rows.size else float("nan")
+
+
 def synthetic_vectors() -> np.ndarray:
     from engine.benchmark import Case, describe_case
 
@@ -81,10 +89,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
 
+    origin = None
     if args.synthetic:
         v = synthetic_vectors()
     else:
-        v = random_walk_descriptors(args.n, args.d, args.seed)[0]
+        v, origin = random_walk_descriptors(args.n, args.d, args.seed)
     n, d = v.shape
     if args.nprobe is not None:
         retrieval.NPROBE = args.nprobe
@@ -110,6 +119,7 @@ def main() -> None:
         "background_wall_s": round(w2 - w1, 2), "background_cpu_s": round(c2 - c1, 2),
         "peak_rss_mb": round(peak), "rss_before_mb": round(base_mb),
         "recall_at_k": round(recall_at_k(neigh.index[rows], truth), 4),
+        "revisits_found": None if origin is None else round(revisits_found(neigh, origin), 4),
         "median_top_z": round(float(np.nanmedian(z[:, 0])), 2),
         "load_avg_1min": round(os.getloadavg()[0], 1),
     }

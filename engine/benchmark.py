@@ -270,6 +270,8 @@ def random_walk_descriptors(n: int, d: int = 1024, seed: int = 0, revisit_share:
             x /= np.linalg.norm(x)
             walk[i + t] = x
         i += length
-    out = walk + 0.65 * mean_dir[None, :]
-    out /= np.linalg.norm(out, axis=1, keepdims=True)
-    return out.astype(np.float32), origin
+    for r0 in range(0, n, 8192):   # in place, a block at a time: no second (n, d) copy
+        block = walk[r0:r0 + 8192]
+        block += 0.65 * mean_dir[None, :]
+        block /= np.linalg.norm(block, axis=1, keepdims=True)
+    return walk, origin

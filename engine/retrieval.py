@@ -7,7 +7,7 @@ Here every question is answered with memory bounded whatever n:
 * ``nearest``: for every row its k best rows more than ``exclude`` apart in time.
   Exact search multiplies one block of rows by all rows at a time (``block_rows_for``
   keeps rows * n under ``BLOCK_ELEMENTS``); beyond ``EXACT_MAX_COST`` (n * n * d) the
-  approximate path (an inverted-file index of ``faiss``, when installed) takes over.
+  approximate path (an inverted file searched with matrix products, numpy only) takes over.
 * ``background``: each row's robust similarity to "a different place" (median and MAD
   of its similarities to a fixed random sample of columns outside its temporal window).
 * ``calibrated`` / ``pair_z``: symmetric z-scores of candidate pairs against both rows'
@@ -30,16 +30,17 @@ from .calibrate import robust_stats
 # 200 MB, a few hundred MB at most whatever n.
 BLOCK_ELEMENTS = 16_000_000
 
-# Exact search costs n * n * d multiply-adds plus an n * n selection. Measured on this
-# project's 2-core machine (benchmarks/bench_retrieval.py, OMP_NUM_THREADS=2, 1024-D):
-# exact is 7.3 s at 20k nodes (4.1e11) and the inverted file 2.3 s; at 5k (2.6e10) exact
-# is 0.5 s and exact needs no index. Exact stays under ~10 s up to about 6e11, so "auto"
-# searches exactly below that and approximately above (100k x 1024-D is 1e13: exact
-# would take about 3 minutes).
-EXACT_MAX_COST = 6e11
+# Exact search costs n * n * d multiply-adds plus an n * n selection; the approximate
+# path grows about linearly with n. Measured with benchmarks/bench_retrieval.py
+# (random-walk 1024-D descriptors, k 10, OMP_NUM_THREADS=2, CPU seconds on the shared
+# 2-core development machine): exact 1.1 s at 5k (n*n*d 2.6e10) and 14.9 s at 20k
+# (4.1e11); approximate 3.9 s at 5k and 8.7 s at 20k. The two cross near 12k-15k rows
+# at 1024-D (n*n*d about 2e11), where exact costs about 7 s: "auto" stays exact (no
+# recall loss) up to there. 100k x 1024-D (1e13) would cost exact about 6 minutes.
+EXACT_MAX_COST = 2e11
 
-# Columns sampled per row for the background (median and MAD need a few hundred
-# distant values to be stable; 1024 keeps the MAD within a few percent).
+# Columns sampled per row for the background: the median of 1024 values has a standard
+# error of 1.25 / sqrt(1024), about 4% of the spread (the brief asked for >= 1024).
 BACKGROUND_SAMPLE = 1024
 # MAD -> standard deviation for a normal distribution; spread floor against division by 0.
 _SD_FLOOR = 1e-3
@@ -122,9 +123,12 @@ def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int]) -> Ne
 # on a sample of SAMPLE_PER_CELL rows per cell); each query scans the NPROBE cells
 # whose centres are most similar to it, as one (queries of the cell) x (rows of the
 # cell) product per cell, and keeps exact full-vector similarities. Cost about
-# n * NPROBE * CELL_ROWS * d instead of n * n * d. Numbers measured on 100k x 1024-D
-# random-walk descriptors (benchmarks/bench_retrieval.py); faiss-cpu's IVF-flat and
-# HNSW were measured too and were slower here (see that benchmark's docstring).
+# n * NPROBE * CELL_ROWS * d instead of n * n * d. Measured on 100k x 1024-D random-walk
+# descriptors (benchmarks/bench_retrieval.py, one thread, CPU seconds): NPROBE 8 takes
+# 10.9 s, recall@10 0.894 against exact, and finds 99.96% of the revisits; NPROBE 16
+# takes 20.2 s for recall@10 0.922 and 99.99%: the revisits (what loop closure needs)
+# are already found at 8, so 8 it is. faiss-cpu (IVF-flat, HNSW) was measured slower
+# (see that benchmark's docstring), so no dependency is added.
 CELL_ROWS = 256
 SAMPLE_PER_CELL = 32
 KMEANS_ITERATIONS = 8
@@ -144,8 +148,9 @@ def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndar
     centres = sample[rng.choice(sample.shape[0], cells, replace=False)].copy()
     for _ in range(KMEANS_ITERATIONS):
         label = np.argmax(sample @ centres.T, axis=1)
-        sums = np.zeros_like(centres)
-        np.add.at(sums, label, sample)
+        onehot = np.zeros((cells, sample.shape[0]), np.float32)
+        onehot[label, np.arange(sample.shape[0])] = 1.0
+        sums = onehot @ sample          # per-cell sums as one product (np.add.at is slow)
         norm = np.linalg.norm(sums, axis=1)
         empty = norm == 0   # an empty cell restarts on a random sample row
         sums[empty] = sample[rng.choice(sample.shape[0], int(empty.sum()))]
@@ -153,8 +158,9 @@ def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndar
     return centres.astype(np.float32)
 
 
-def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: int = NPROBE, seed: int = 0) -> Neighbours:
+def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: Optional[int] = None, seed: int = 0) -> Neighbours:
     n = v.shape[0]
+    nprobe = NPROBE if nprobe is None else nprobe
     cells = int(max(1, min(n // 4, round(n / CELL_ROWS))))
     nprobe = int(min(nprobe, cells))
     centre = v.mean(axis=0)
