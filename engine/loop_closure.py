@@ -12,17 +12,21 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 3. ``support``      the mean calibrated score along the matched stretch, forwards (the same
                     way again) and backwards (a reverse drive): the paper's window count,
                     generalised to both directions.
-4. ``geometry``     local features of the two frames matched and fitted with a two-view model
+4. ``one_per_place`` a match must be the most confident (score + support) within
+                    ``place_radius`` nodes on both ends (non-maximum suppression in the
+                    (a, b) plane), so that geometry is checked once per place.
+5. ``geometry``     local features of the two frames matched and fitted with a two-view model
                     on the sphere (essential matrix, or a pure rotation at the same spot):
-                    inliers are physical evidence of the same place; the rotation gives the
-                    loop's ``yaw``. Results are cached per frame pair.
-5. ``confidence``   one ranking number from the three voices.
-6. ``one_per_place`` a loop must be the most confident within ``place_radius`` nodes on both
-                    ends (non-maximum suppression in the (a, b) plane).
+                    inliers are physical evidence of the same scene; the rotation gives the
+                    loop's ``yaw``. The same is measured between each end and its path
+                    neighbour just outside the temporal window (``path_inliers``): a place
+                    revisited within a metre shares more with the other visit than with a
+                    view a few metres along its own path. Cached per frame pair.
+6. ``confidence``   one ranking number from the three voices.
 7. ``tiers``        auto (strong evidence) or candidate (for a person), by the thresholds.
 8. ``consistency``  relative headings composed around a cycle of path and two loops must
                     close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
-                    with more confident loops nearby goes back to the candidate tier.
+                    with the loops around it goes back to the candidate tier.
 
 Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
 so re-mapping after a threshold change costs only stages 5-8.
@@ -55,6 +59,7 @@ class Matches:
     inliers: np.ndarray = None    # int64 two-view inliers (stage 4; -1 unknown)
     inlier_ratio: np.ndarray = None
     yaw: np.ndarray = None        # float64 relative heading of b to a, degrees (NaN unknown)
+    path_inliers: np.ndarray = None  # int64 inliers of each end with its own path neighbour (-1 unknown)
     confidence: np.ndarray = None
 
     def __len__(self) -> int:
@@ -104,7 +109,7 @@ def calibrate(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray) -> tuple
     from . import retrieval
 
     cos = retrieval.pair_similarities(vectors, a, b)
-    return cos, retrieval.calibrated_pairs(stats, a, b, cos)
+    return cos, retrieval.pair_z(vectors, stats, a, b)
 
 
 def support(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray, params: MapParams
@@ -117,10 +122,8 @@ def support(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray, params: Ma
     carry it)."""
     from . import retrieval
 
-    fwd = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, +1,
-                                     exclude=params.neighbor_node_num)
-    rev = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, -1,
-                                     exclude=params.neighbor_node_num)
+    fwd, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, +1)
+    rev, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, -1)
     fwd = np.nan_to_num(fwd, nan=-np.inf)
     rev = np.nan_to_num(rev, nan=-np.inf)
     best = np.maximum(fwd, rev)
@@ -135,46 +138,8 @@ GEOMETRY_MARGIN_Z = 1.0
 INLIERS_PER_Z = 20.0
 
 
-def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cache: dict) -> dict:
-    """Stage 4: two-view geometry on the sphere of the frames of node pairs (a, b).
-
-    Returns arrays ``matches``, ``inliers`` (-1 where no features), ``inlier_ratio`` and
-    ``yaw`` (degrees, shifted frames; NaN where no model). Cached per frame pair, so a new
-    node threshold re-verifies only the pairs it has not seen."""
-    from . import sphere
-
-    n = a.size
-    out = {"matches": np.full(n, -1, np.int64), "inliers": np.full(n, -1, np.int64),
-           "inlier_ratio": np.full(n, np.nan), "yaw": np.full(n, np.nan)}
-    if features is None or n == 0:
-        return out
-    store = cache.setdefault("geometry", {})
-    ra, rb = node_rows[a], node_rows[b]
-    todo = [i for i in range(n) if (int(ra[i]), int(rb[i])) not in store]
-    if todo:
-        res = sphere.verify_pairs(features, ra[todo], rb[todo])
-        for j, i in enumerate(todo):
-            store[(int(ra[i]), int(rb[i]))] = (int(res["matches"][j]), int(res["inliers"][j]),
-                                               float(res["inlier_ratio"][j]), float(res["yaw_deg"][j]))
-    for i in range(n):
-        m_, in_, r_, y_ = store[(int(ra[i]), int(rb[i]))]
-        out["matches"][i], out["inliers"][i], out["inlier_ratio"][i], out["yaw"][i] = m_, in_, r_, y_
-    return out
-
-
-def confidence(c: Matches) -> np.ndarray:
-    """Stage 5: calibrated score + positive support + inliers / ``INLIERS_PER_Z``.
-
-    Each voice is in (about) standard deviations of evidence: the score and the support are
-    calibrated z; ``INLIERS_PER_Z`` = 20 because unrelated views keep about 20 inliers at
-    most (99th percentile 22 in the probe of issue 13), so 20 more is one more spread."""
-    geo = np.where(c.inliers > 0, c.inliers / INLIERS_PER_Z, 0.0)
-    sup = np.where(np.isfinite(c.support), np.maximum(c.support, 0.0), 0.0)
-    return c.score + sup + geo
-
-
 def one_per_place(c: Matches, radius: int) -> np.ndarray:
-    """Stage 6: keep a match only if no more confident match lies within ``radius`` nodes on
+    """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
     both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
     ``radius`` nodes or so, not one per node pair."""
     keep = np.ones(len(c), bool)
@@ -192,15 +157,79 @@ def one_per_place(c: Matches, radius: int) -> np.ndarray:
     return keep
 
 
+def _verified(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cache: dict):
+    """(matches, inliers, inlier_ratio, yaw of the shifted frames) of node pairs, from the
+    per-frame-pair cache, verifying only the pairs not seen before."""
+    from . import sphere
+
+    store = cache.setdefault("geometry", {})
+    ra, rb = node_rows[a], node_rows[b]
+    keys = list(zip(ra.tolist(), rb.tolist()))
+    todo = sorted({k for k in keys if k not in store})
+    if todo:
+        arr = np.asarray(todo, np.int64)
+        res = sphere.verify_pairs(features, arr[:, 0], arr[:, 1])
+        for j, k in enumerate(todo):
+            store[k] = (int(res["matches"][j]), int(res["inliers"][j]),
+                        float(res["inlier_ratio"][j]), float(res["yaw_deg"][j]))
+    if not keys:
+        return np.zeros((0, 4))
+    return np.asarray([store[k] for k in keys], np.float64)
+
+
+def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap: int, cache: dict) -> dict:
+    """Stage 5: two-view geometry on the sphere of node pairs (a, b), and of each end with its
+    path neighbour ``gap`` nodes away (the nearest node that could be a loop).
+
+    Returns arrays ``matches``, ``inliers`` (-1 where there are no features), ``inlier_ratio``,
+    ``yaw`` (degrees, shifted frames; NaN where no model) and ``path_inliers`` (the larger
+    count of the two ends with their path neighbours, before or after)."""
+    n = a.size
+    out = {"matches": np.full(n, -1, np.int64), "inliers": np.full(n, -1, np.int64),
+           "inlier_ratio": np.full(n, np.nan), "yaw": np.full(n, np.nan),
+           "path_inliers": np.full(n, -1, np.int64)}
+    if features is None or n == 0:
+        return out
+    pair = _verified(features, node_rows, a, b, cache)
+    out["matches"], out["inliers"] = pair[:, 0].astype(np.int64), pair[:, 1].astype(np.int64)
+    out["inlier_ratio"], out["yaw"] = pair[:, 2], pair[:, 3]
+    m = node_rows.size
+    best = np.zeros(n, np.int64)
+    for end in (a, b):
+        for step in (-gap, gap):
+            other = end + step
+            ok = (other >= 0) & (other < m)
+            if ok.any():
+                lo, hi = np.minimum(end[ok], other[ok]), np.maximum(end[ok], other[ok])
+                ref = _verified(features, node_rows, lo, hi, cache)[:, 1].astype(np.int64)
+                best[ok] = np.maximum(best[ok], ref)
+    out["path_inliers"] = best
+    return out
+
+
+def confidence(c: Matches) -> np.ndarray:
+    """Stage 6: calibrated score + positive support + inliers beyond the path's own /
+    ``INLIERS_PER_Z``.
+
+    Each voice is in (about) standard deviations of evidence: the score and the support are
+    calibrated z; ``INLIERS_PER_Z`` = 20 because unrelated views keep about 20 inliers at
+    most (99th percentile 22 in the probe of issue 13), so 20 more is one more spread."""
+    lift = np.where(c.inliers > 0, np.maximum(c.inliers - np.maximum(c.path_inliers, 0), 0), 0)
+    sup = np.where(np.isfinite(c.support), np.maximum(c.support, 0.0), 0.0)
+    return c.score + sup + lift / INLIERS_PER_Z
+
+
 def tiers(c: Matches, params: MapParams) -> np.ndarray:
     """Stage 7: "auto", "candidate" or "" (dropped) for every match.
 
-    Automatic: strong geometry (``auto_inliers`` and ``auto_inlier_ratio``) on a match at
-    least at ``candidate_z``; or, where geometry is not known (descriptors from another
-    program), a high score (``auto_z``) with strong support along the stretch
-    (``auto_support``). A candidate is any other match at ``candidate_z`` or with strong
-    geometry alone."""
-    geo_strong = (c.inliers >= params.auto_inliers) & (np.nan_to_num(c.inlier_ratio) >= params.auto_inlier_ratio)
+    Automatic: strong geometry (``auto_inliers``, ``auto_inlier_ratio``, and ``auto_lift``
+    times the inliers each end shares with its own path neighbour) on a match at least at
+    ``candidate_z``; or, where geometry is not known (descriptors from another program), a
+    high score (``auto_z``) with strong support along the stretch (``auto_support``). A
+    candidate is any other match at ``candidate_z`` or with strong geometry alone."""
+    geo_strong = ((c.inliers >= params.auto_inliers)
+                  & (np.nan_to_num(c.inlier_ratio) >= params.auto_inlier_ratio)
+                  & (c.inliers >= params.auto_lift * np.maximum(c.path_inliers, 0)))
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
     auto = ((geo_strong & (c.score >= params.candidate_z))
@@ -217,20 +246,25 @@ DRIFT_PER_STEP_DEG = 2.0
 def path_headings(features, columns, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
                   cache: dict) -> Optional[np.ndarray]:
     """Heading of every node relative to node 0, degrees, summed from consecutive relative
-    yaws (geometry where features exist, else column alignment; None without either)."""
+    yaws: two-view geometry where features exist (a robot turning on the spot between two
+    nodes turns the view by 100 degrees or more, which column alignment of rotation-alike
+    corridors gets wrong: 122-degree turns read as 0-20 on the second family), column
+    alignment for steps without a model or without features; None without either."""
     m = node_rows.size
     if m < 2:
         return np.zeros(m)
     steps = np.arange(m - 1)
+    yaw = np.full(m - 1, np.nan)
     if features is not None:
-        yaw = geometry(features, node_rows, steps, steps + 1, cache)["yaw"]
+        yaw = _verified(features, node_rows, steps, steps + 1, cache)[:, 3]
         yaw = original_yaw(yaw, shifts[steps], shifts[steps + 1], frame_width)
-    elif columns is not None:
+    if columns is not None and not np.isfinite(yaw).all():
         from .verify import align_nodes, pair_yaw
 
         _, sh = align_nodes(columns, steps, steps + 1)
-        yaw = pair_yaw(sh, columns.shape[1], shifts[steps], shifts[steps + 1], frame_width)
-    else:
+        yaw = np.where(np.isfinite(yaw), yaw,
+                       pair_yaw(sh, columns.shape[1], shifts[steps], shifts[steps + 1], frame_width))
+    if features is None and columns is None:
         return None
     return np.concatenate([[0.0], np.cumsum(np.nan_to_num(yaw))])
 
@@ -304,33 +338,39 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     cos, score = calibrate(v, stats, a, b)                             # 2
     c = Matches(a=a, b=b, cosine=cos, score=score)
     c.support, c.direction = support(v, stats, a, b, params)          # 3
-    worth = (c.score >= params.candidate_z - GEOMETRY_MARGIN_Z) | (
-        np.nan_to_num(c.support, nan=-np.inf) >= params.candidate_z - GEOMETRY_MARGIN_Z)
-    c = c.take(worth)
-    geo = geometry(features, node_rows, c.a, c.b, cache)              # 4
+    sup = np.nan_to_num(c.support, nan=-np.inf)
+    c = c.take((c.score >= params.candidate_z - GEOMETRY_MARGIN_Z)
+               | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
+    c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
+    c = c.take(one_per_place(c, params.place_radius))                  # 4
+    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache)   # 5
     c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
+    c.path_inliers = geo["path_inliers"]
     c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
-    if features is None and columns is not None and len(c):
+    if columns is not None and len(c):
         from .verify import align_nodes, pair_yaw
 
         _, sh = align_nodes(columns, c.a, c.b)
-        c.yaw = pair_yaw(sh, columns.shape[1], shifts[c.a], shifts[c.b], frame_width)
-    c.confidence = confidence(c)                                       # 5
-    c = c.take(one_per_place(c, params.place_radius))                  # 6
+        column_yaw = pair_yaw(sh, columns.shape[1], shifts[c.a], shifts[c.b], frame_width)
+        c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw)
+    c.confidence = confidence(c)                                       # 6
     status = tiers(c, params)                                          # 7
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
     status = consistency(c, status, headings, params)                  # 8
-    keep = np.flatnonzero(status != "")
     out = []
-    for i in keep[np.argsort(-c.confidence[keep])]:
+    for i in np.flatnonzero(status != ""):
         out.append(LoopCandidate(
             a=int(c.a[i]), b=int(c.b[i]), similarity=float(c.cosine[i]), window_count=0,
             yaw=None if not np.isfinite(c.yaw[i]) else float(c.yaw[i]), score=float(c.score[i]),
-            status=str(status[i]),
-            evidence={"score": float(c.score[i]), "support": float(c.support[i]),
-                      "direction": int(c.direction[i]),
-                      "matches": None if c.matches[i] < 0 else int(c.matches[i]),
-                      "inliers": None if c.inliers[i] < 0 else int(c.inliers[i]),
-                      "inlier_ratio": float(c.inlier_ratio[i]), "confidence": float(c.confidence[i])}))
+            status=str(status[i]), evidence=_evidence(c, i)))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
+
+
+def _evidence(c: Matches, i: int) -> dict:
+    known = c.inliers[i] >= 0
+    return {"score": float(c.score[i]), "support": float(c.support[i]), "direction": int(c.direction[i]),
+            "matches": int(c.matches[i]) if known else None, "inliers": int(c.inliers[i]) if known else None,
+            "inlier_ratio": float(c.inlier_ratio[i]) if known else None,
+            "path_inliers": int(c.path_inliers[i]) if known else None,
+            "confidence": float(c.confidence[i])}

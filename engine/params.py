@@ -84,6 +84,10 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("auto_inlier_ratio", float, 0.3, _NEW,
               "share of matches that are inliers for an automatic loop",
               "chosen on the first synthetic family", 0.0, 1.0),
+    Parameter("auto_lift", float, 1.5, _NEW,
+              "an automatic loop shares this many times the inliers each end shares with its own "
+              "path neighbour just outside the temporal window",
+              "chosen on the first synthetic family", 0.0, 100.0),
     Parameter("place_radius", int, 4, _NEW,
               "one loop per place: a loop must be the most confident within this many nodes "
               "on both ends", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
@@ -112,6 +116,7 @@ class MapParams:
     auto_support: float = 3.0
     auto_inliers: int = 40
     auto_inlier_ratio: float = 0.3
+    auto_lift: float = 1.5
     place_radius: int = 4
     heading_tol: float = 35.0
 

@@ -71,7 +71,7 @@ class ParamsPanel(QWidget):
                                          "from this recording's own similarities (undoable)")
         self.calibrate_button.clicked.connect(self.calibrateRequested)
         self.long_runs = QCheckBox("Long runs")
-        self.long_runs.setToolTip("verified: also look for stretches driven twice with a lateral offset "
+        self.long_runs.setToolTip("verified-rules: also look for stretches driven twice with a lateral offset "
                                   "(finds more returns, rarely a false loop)")
 
         self.method.currentIndexChanged.connect(lambda _: self._edited("method"))

@@ -8,13 +8,13 @@ from engine.params import MapParams
 P = MapParams()
 
 
-def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confidence=None):
+def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confidence=None, path=None):
     n = len(a)
     arr = lambda v, default, dt=np.float64: np.asarray(v if v is not None else [default] * n, dt)  # noqa: E731
     return Matches(a=np.asarray(a, np.int64), b=np.asarray(b, np.int64), cosine=arr(None, 0.5, np.float32),
                    score=arr(score, 0.0), support=arr(support, 0.0), direction=np.ones(n, np.int64),
                    matches=arr(inliers, -1, np.int64) * 2, inliers=arr(inliers, -1, np.int64),
-                   inlier_ratio=arr(ratio, np.nan), yaw=arr(yaw, np.nan),
+                   inlier_ratio=arr(ratio, np.nan), yaw=arr(yaw, np.nan), path_inliers=arr(path, -1, np.int64),
                    confidence=arr(confidence if confidence is not None else score, 0.0))
 
 
@@ -29,6 +29,15 @@ def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate()
                 score=[P.candidate_z + 0.5, P.candidate_z + 0.5, P.candidate_z - 0.5, 1.0],
                 inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05])
     assert tiers(c, P).tolist() == ["auto", "candidate", "", ""]
+
+
+def test_geometry_no_stronger_than_between_path_neighbours_is_not_enough_for_an_automatic_loop():
+    # Two views 6 nodes apart along one street share as much as the loop's ends share with
+    # their own path neighbours: the same scene, not the same place.
+    strong = P.auto_inliers * 3
+    c = matches(a=[0, 30], b=[60, 90], score=[P.candidate_z + 1] * 2, inliers=[strong, strong],
+                ratio=[0.8, 0.8], path=[strong // 4, strong])
+    assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
 def test_without_geometry_only_score_and_support_together_make_an_automatic_loop():
