@@ -274,7 +274,8 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
                    help="verified: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")
-    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
+    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
+                                    "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)

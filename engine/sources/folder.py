@@ -31,7 +31,10 @@ Positions: when EVERY photo has an EXIF GPS fix, ``FolderSource.poses`` holds th
 ``engine.poses.Poses`` on the frames' stamps: metres east (x) and north (y) of the first
 photo's fix (``geo.local_metres``), with yaw from GPSImgDirection when every photo has
 one. Otherwise ``poses`` is None (no partial tracks). Malformed tags are skipped with a
-line in ``FolderSource.warnings``.
+line in ``FolderSource.warnings``. ``panotopo map`` stores these positions as node ``x``,
+``y`` unless ``--poses`` is given, e.g. for five GoPro MAX photos walking 9 m north::
+
+    panotopo map ../shared/data/real/panoramax-gopromax -o gopro.graphml
 """
 
 from __future__ import annotations
