@@ -10,8 +10,8 @@ A compressed video can only be decoded from a key frame onwards, so:
    order, which equals ``round(stamp * fps)`` for constant-frame-rate video.
 2. **Plan** (``plan_samples``): for t_k = k * interval, either
    - *key frames*: the key frame nearest to each t_k, when EVERY t_k has a key frame
-     of its own within ``keyframe_tolerance(interval)`` = max(0.25 s, interval / 4)
-     (one decode per sample); or
+     of its own within ``keyframe_tolerance(interval)`` = max(0.25 s, interval / 4),
+     plus half a frame (one decode per sample); or
    - *exact*: the first frame with stamp >= t_k (``engine.frames.sample_indices``,
      the same frames as the OpenCV reader).
 3. **Decode** (``AvSampler.frames``): picks are grouped by the key frame their
@@ -98,8 +98,11 @@ def plan_samples(index: StreamIndex, interval: float, use_keyframes: bool = True
     """Which frames sampling every ``interval`` seconds delivers (see module doc).
 
     Key frames are used only when every sample time t_k has its own key frame within
-    ``keyframe_tolerance(interval)``; otherwise every sample is the exact frame, so a
-    recording is sampled one way throughout (no mixture of early and late samples).
+    ``keyframe_tolerance(interval)`` plus half a frame; otherwise every sample is the exact
+    frame, so a recording is sampled one way throughout (no mixture of early and late
+    samples). Known limit: a GOP slightly longer than the interval (30 frames at 29.97 fps
+    sampled at 1 Hz) drifts 1 ms per sample off the sample times, so on recordings longer
+    than about 4 minutes it fails the rule and is sampled exactly (correct, but slower).
     """
     exact = sample_indices(index.stamps, interval)
     if not use_keyframes or interval <= 0 or exact.size == 0:
@@ -112,7 +115,10 @@ def plan_samples(index: StreamIndex, interval: float, use_keyframes: bool = True
     right = np.clip(np.searchsorted(key_t, targets), 0, key_t.size - 1)
     left = np.clip(right - 1, 0, key_t.size - 1)
     nearest = np.where(np.abs(key_t[left] - targets) <= np.abs(key_t[right] - targets), left, right)
-    ok = np.abs(key_t[nearest] - targets) <= keyframe_tolerance(interval) + 1e-9
+    # + half a frame: frames are discrete, so a key frame can only be "on" a sample time to
+    # within half a frame (a 0.5005 s GOP at 29.97 fps is at most 0.25025 s from 1 Hz times)
+    half_frame = 0.5 / index.fps if index.fps > 0 else 0.0
+    ok = np.abs(key_t[nearest] - targets) <= keyframe_tolerance(interval) + half_frame + 1e-9
     if not np.all(ok) or np.unique(nearest).size != nearest.size:
         return SamplePlan(exact, "exact")
     return SamplePlan(key_idx[nearest].astype(np.int64), "keyframes")
