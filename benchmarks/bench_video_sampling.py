@@ -67,9 +67,9 @@ def time_sampler(path: Path, interval: float) -> tuple[float, int, int, str]:
     from engine.sources.video_av import AvSampler
 
     t0 = time.perf_counter()
-    with AvSampler(path) as sampler:
-        n = sum(1 for _ in sampler.frames(interval))
-        stats = sampler.last_stats
+    sampler = AvSampler(path)  # includes the index pass (demux, no decoding)
+    n = sum(1 for _ in sampler.frames(interval))
+    stats = sampler.last_stats
     return time.perf_counter() - t0, n, stats.decoded, stats.mode
 
 

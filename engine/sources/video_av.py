@@ -232,6 +232,7 @@ class AvSampler:
             stream.codec_context.thread_type = "AUTO"
             packets = _PacketReader(container, stream, self.index, stats)
             for first, last, picks in self._runs(plan.indices):
+                stats.runs.append((first, last))
                 wanted = {int(self.index.pts[i]): i for i in picks}
                 got: dict[int, np.ndarray] = {}
                 try:
@@ -258,15 +259,6 @@ class AvSampler:
             i = wanted.get(frame.pts)
             if i is not None:
                 got[i] = frame.to_ndarray(format="rgb24")
-
-    def close(self) -> None:
-        pass
-
-    def __enter__(self) -> "AvSampler":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 class _PacketReader:
