@@ -8,7 +8,8 @@ rolled 8 px per frame, so every frame is textured and different), then times:
 
 1. decoding every frame with OpenCV (``grab()`` only: what the old reader paid to sample);
 2. ``engine.sources.video_av.AvSampler`` at the interval (decoded-frame count included);
-3. ``engine.pipeline.describe`` at the interval, end to end (open, sample, shift, describe).
+3. ``engine.pipeline.describe_frames`` at the interval through the OpenCV reader and through
+   the PyAV sampler (sample, shift, columns, colours, effnet-vlad; model loaded beforehand).
 
 It prints a table with the ratios to (1) and extrapolates (2) to an hour of 4K30.
 """
@@ -73,11 +74,15 @@ def time_sampler(path: Path, interval: float) -> tuple[float, int, int, str]:
     return time.perf_counter() - t0, n, stats.decoded, stats.mode
 
 
-def time_describe(path: Path, interval: float) -> tuple[float, int]:
-    from engine.pipeline import DescribeSettings, describe
+def time_describe(path: Path, interval: float, use_pyav: bool, model) -> tuple[float, int]:
+    """Sampling + shift + descriptors through one reader (the model is loaded beforehand)."""
+    from engine.pipeline import DescribeSettings, describe_frames
+    from engine.sources import VideoSource
 
     t0 = time.perf_counter()
-    descs = describe(path, DescribeSettings(interval=interval))
+    with VideoSource(path, use_pyav=use_pyav) as src:
+        descs = describe_frames(src.frames(interval), src.expected_samples(interval),
+                                DescribeSettings(interval=interval), model=model)
     return time.perf_counter() - t0, len(descs)
 
 
@@ -100,12 +105,19 @@ def main() -> None:
         return
     full, n = time_opencv_full(clip)
     rows = [("OpenCV decode of all frames", full, n, n, "all")]
+    model = None
+    if not args.no_describe:
+        from engine import descriptors
+
+        model = descriptors.get("effnet-vlad")
+        model.describe(iter([np.zeros((H // 4, W // 4, 3), np.uint8)]), 1)  # load the weights
     for interval in args.interval:
         t, k, decoded, mode = time_sampler(clip, interval)
         rows.append((f"AvSampler every {interval:g} s", t, k, decoded, mode))
-        if not args.no_describe:
-            t, k = time_describe(clip, interval)
-            rows.append((f"describe every {interval:g} s (effnet-vlad)", t, k, None, ""))
+        if model is not None:
+            for use_pyav, reader in ((False, "OpenCV"), (True, "PyAV")):
+                t, k = time_describe(clip, interval, use_pyav, model)
+                rows.append((f"describe every {interval:g} s, {reader} reader", t, k, None, ""))
     print(f"\n{clip.name}: {n} frames, {n / FPS:.0f} s\n")
     print("| what | seconds | x full decode | frames out | frames decoded | mode |")
     print("|------|--------:|--------------:|-----------:|---------------:|------|")
