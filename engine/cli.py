@@ -103,6 +103,16 @@ def _load_poses(path: str, topic: Optional[str]):
     return read_poses(Path(path), topic=topic)
 
 
+def _recording_poses(args: argparse.Namespace):
+    """Positions the recording carries itself (a photo folder's EXIF GPS); --poses wins."""
+    from .sources import recording_poses
+
+    poses, warnings = recording_poses(Path(args.input), interval=args.interval)
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
+    return poses
+
+
 def _say(args: argparse.Namespace, text: str) -> None:
     if not args.quiet:
         print(text)
@@ -130,7 +140,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         found = paper_thresholds(descs.vectors, params.neighbor_node_num)
         params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
     topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
-    poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    poses = _load_poses(args.poses, args.pose_topic) if args.poses else _recording_poses(args)
     if poses is not None:
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
@@ -274,7 +284,8 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
                    help="verified-rules: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")
-    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
+    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
+                                    "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)
