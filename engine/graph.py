@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import copy as _copy
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Iterable, Optional
 
@@ -256,6 +254,13 @@ class TopoMap:
         frames = self.frames()
         by_frame = {int(f): n for f, n in zip(frames, order)}
 
+        first, last = int(frames.min()), int(frames.max())
+
+        def inside(*fs: int) -> bool:
+            """A decision on frames outside the recording's mapped span is kept as
+            unapplied, not snapped to the end node (a crafted n0-n99 loop, issue 16)."""
+            return all(first <= f <= last for f in fs)
+
         def nearest(f: int) -> str:  # the first of two equally near nodes
             return order[int(np.argmin(np.abs(frames - f)))]
 
@@ -265,6 +270,9 @@ class TopoMap:
         for item in dec.get("loops", []):
             fa, fb = (int(f) for f in item["frames"])
             status = item.get("status")
+            if not inside(fa, fb):
+                self.unapplied["loops"].append(_copy.deepcopy(item))
+                continue
             u, v = by_frame.get(fa), by_frame.get(fb)
             if u is None or v is None or not is_loop(u, v):
                 u, v = nearest(fa), nearest(fb)
@@ -276,6 +284,9 @@ class TopoMap:
 
         for item in dec.get("manual", []):
             fa, fb = (int(f) for f in item["frames"])
+            if not inside(fa, fb):
+                self.unapplied["manual"].append(_copy.deepcopy(item))
+                continue
             u, v = nearest(fa), nearest(fb)
             yaw = item.get("yaw")
             if u != v and is_loop(u, v):
@@ -289,6 +300,9 @@ class TopoMap:
                 self.unapplied["manual"].append(_copy.deepcopy(item))
 
         for item in dec.get("labels", []):
+            if not inside(int(item["frame"])):
+                self.unapplied["labels"].append(_copy.deepcopy(item))
+                continue
             self.graph.nodes[nearest(int(item["frame"]))]["label"] = str(item["label"])
 
     # ----- copies and export --------------------------------------------------------------
@@ -315,16 +329,10 @@ class TopoMap:
 
     def write_graphml(self, path: str | Path, keep_rejected: bool = False) -> None:
         """Write the corrected map; atomic (a temporary file replaced into place)."""
-        path = Path(path)
+        from .outputs import write_atomically
+
         g = self.corrected(keep_rejected)
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            nx.write_graphml(g, tmp, infer_numeric_types=False)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_atomically(path, lambda f: nx.write_graphml(g, f, infer_numeric_types=False))
 
     @classmethod
     def read_graphml(cls, path: str | Path) -> "TopoMap":

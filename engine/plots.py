@@ -122,4 +122,9 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
     axm.set_ylabel("node")
 
     fig.tight_layout()
-    fig.savefig(str(path))
+    from .outputs import write_atomically
+
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in fig.canvas.get_supported_filetypes():
+        suffix = "png"
+    write_atomically(path, lambda f: fig.savefig(f, format=suffix))

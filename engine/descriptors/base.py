@@ -46,18 +46,17 @@ class Descriptors:
     def save(self, path: str | Path, vector_dtype=np.float32) -> None:
         """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
         contract's files (``panotopo describe``) keep float32."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(
-            tmp,
+        from ..outputs import write_atomically  # random temp name, umask mode, atomic
+
+        write_atomically(path, lambda f: np.savez(
+            f,
             stamps=np.asarray(self.stamps, np.float64),
             frames=np.asarray(self.frames, np.int64),
             shifts=np.asarray(self.shifts, np.int64),
             descriptors=np.asarray(self.vectors, vector_dtype),
             meta=np.array(json.dumps(self.meta)),
             **self.optional_arrays(),
-        )
-        tmp.replace(path)  # atomic: a crash never leaves half a file
+        ))
 
     @classmethod
     def load(cls, path: str | Path) -> "Descriptors":

@@ -33,6 +33,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular
+from ..validate import frame_size, image_file_size
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 STAMPS_FILE = "stamps.csv"
@@ -116,6 +117,9 @@ class FolderSource(IndexedSource):
 
     def _read(self, index: int) -> np.ndarray:
         file = self.files[index]
+        size = image_file_size(file)  # from the header: refuse a huge image before decoding it
+        if size is not None:
+            frame_size(*size, str(file))
         bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
         if bgr is None:
             raise InputError(f"{file}: unreadable or corrupt image")
