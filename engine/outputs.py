@@ -112,7 +112,7 @@ def write_atomically(path: str | Path, write: Callable[[BinaryIO], None],
         if isinstance(exc, OSError):
             raise InputError(f"{path}: cannot write ({exc.strerror or exc.__class__.__name__})") from None
         raise
-    _sync_folder(target.parent)
+    sync_folder(target.parent)
     return target
 
 
@@ -122,7 +122,7 @@ def write_text(path: str | Path, text: str, inputs: Iterable[Optional[str | Path
     return write_atomically(path, lambda f: f.write(data), inputs)
 
 
-def _sync_folder(folder: Path) -> None:
+def sync_folder(folder: Path) -> None:
     """Make the rename itself durable (best effort: not every system allows it)."""
     try:
         fd = os.open(folder, os.O_RDONLY)
