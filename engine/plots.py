@@ -15,6 +15,7 @@ import numpy as np
 
 from .evaluate import Evaluation, node_positions
 from .graph import TopoMap
+from .limits import MAX_DENSE_NODES
 from .loops import similarity_matrix
 from .poses import Poses
 
@@ -100,7 +101,7 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
 
     # Right: similarity matrix (when descriptors are at hand) with loops overlaid.
     m = topomap.node_count
-    if topomap.node_vectors is not None and m:
+    if topomap.node_vectors is not None and 0 < m <= MAX_DENSE_NODES:  # an m x m picture
         img = axm.imshow(similarity_matrix(topomap.node_vectors), cmap="magma", vmin=-0.2, vmax=1.0,
                          interpolation="nearest")
         fig.colorbar(img, ax=axm, fraction=0.046, pad=0.04, label="cosine similarity")

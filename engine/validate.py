@@ -84,6 +84,16 @@ def map_params(params, name=lambda key: key) -> None:
         integer(getattr(params, key), name(key), lo=lo, hi=limits.MAX_NODE_COUNT_PARAM)
 
 
+def dense_nodes(count: int, method: str) -> None:
+    """Refuse, before allocating, a map whose (nodes x nodes) matrices would not fit."""
+    if count > limits.MAX_DENSE_NODES:
+        need = 5 * 4 * count * count / 2**30
+        raise InputError(f"{count:,} nodes are too many for method '{method}' (it holds several "
+                         f"{count:,} x {count:,} matrices, about {need:,.0f} GiB; limit "
+                         f"{limits.MAX_DENSE_NODES:,} nodes): use --method ours or simple, a larger "
+                         f"--interval or a higher --node-sim-th")
+
+
 # --- frames -----------------------------------------------------------------------------
 
 def frame_size(width: int, height: int, where: str) -> None:

@@ -60,7 +60,10 @@ class Descriptors:
 
     @classmethod
     def load(cls, path: str | Path) -> "Descriptors":
+        from ..npz_guard import check_archive, check_contents
+
         path = Path(path)
+        check_archive(path)  # a zip bomb or a lying header is refused before loading
         try:
             with np.load(path, allow_pickle=False) as z:
                 missing = {"stamps", "frames", "shifts", "descriptors", "meta"} - set(z.files)
@@ -88,6 +91,7 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
         if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape[0] != n):
             raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
+        check_contents(d, path)
         return d
 
 
