@@ -350,11 +350,22 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
 def main(argv: Optional[Sequence[str]] = None, extra_commands: Sequence[AddCommand] = ()) -> int:
     """Run the command line; ``extra_commands`` lets a higher layer (the desktop app's
     ``gui`` command) plug in without the engine ever importing it."""
+    import os
+    import warnings
+
+    # The user gets panotopo's one-line answers, not library chatter: OpenCV's decoder
+    # warnings (a corrupt image) and numpy's RuntimeWarnings (bad values are refused by
+    # the checks; what is left is harmless arithmetic such as 0/0 in an empty statistic).
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
+    warnings.simplefilter("ignore", RuntimeWarning)
     parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     try:
         _check_arguments(args)
         return int(args.func(args) or 0)
+    except MemoryError:
+        print("panotopo: error: not enough memory for this input (see the limits in README.md)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except Cancelled:
         print("panotopo: cancelled", file=sys.stderr)
         return EXIT_CANCELLED
