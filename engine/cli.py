@@ -169,6 +169,9 @@ def cmd_map(args: argparse.Namespace) -> int:
     topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
     poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
     if poses is not None:
+        from .validate import poses_cover
+
+        poses_cover(poses, topomap.stamps(), str(args.poses))
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
     topomap.write_graphml(args.output)

@@ -352,8 +352,29 @@ class TopoMap:
                 raise InputError(f"{path}: node {n} lacks index/frame/stamp")
             d.setdefault("label", "")
             d.setdefault("shift", 0)
+        _check_nodes(g, path)
         for _, _, d in g.edges(data=True):
             d.setdefault("status", "auto")
             d.setdefault("kind", "sequential")
         meta = dict(g.graph)
         return cls(g, meta, None, None)
+
+
+def _check_nodes(g: nx.Graph, path: Path) -> None:
+    """The contract's node numbering, checked (issue 16): indices are the integers
+    0..m-1, each once; frames are integers >= 0; stamps are finite. Duplicate or negative
+    indices made evaluation count pairs that do not exist."""
+    seen: dict[int, str] = {}
+    for n, d in g.nodes(data=True):
+        try:
+            k, frame, stamp = int(d["index"]), int(d["frame"]), float(d["stamp"])
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: node {n} has a non-numeric index, frame or stamp") from None
+        if k < 0 or k >= g.number_of_nodes():
+            raise InputError(f"{path}: node {n} has index {k}, outside 0..{g.number_of_nodes() - 1}")
+        if k in seen:
+            raise InputError(f"{path}: nodes {seen[k]} and {n} have the same index {k}")
+        if frame < 0 or not np.isfinite(stamp):
+            raise InputError(f"{path}: node {n} has a negative frame or a non-finite stamp")
+        seen[k] = n
+        d["index"], d["frame"], d["stamp"] = k, frame, stamp

@@ -45,6 +45,10 @@ MAX_COSINE = 1.0
 # Same-place distance for evaluation, metres: positive and below 10 km.
 MAX_DIST_TH_M = 10_000.0
 
+# Ground-truth poses must cover at least half of the map's node stamps (the rest would be
+# clamped to the first or last pose): less means another clock, and meaningless metrics.
+MIN_POSES_COVERAGE = 0.5
+
 # --- memory ------------------------------------------------------------------------------
 # Methods that hold whole (nodes x nodes) matrices (``verified``: similarities, z-scores,
 # column z-scores, support, all float32, about 5 live at once; the similarity picture of a
@@ -83,6 +87,7 @@ def table() -> list[tuple[str, str]]:
         ("nodes for verified (and the plot's similarity picture)", f"{MAX_DENSE_NODES:,}"),
         ("descriptors in memory while describing", f"{MAX_DESCRIBE_BYTES / 2**30:g} GiB"),
         (".npz member / whole file, uncompressed", f"{MAX_NPZ_MEMBER_BYTES / 2**30:g} / {MAX_NPZ_TOTAL_BYTES / 2**30:g} GiB"),
+        ("ground-truth poses", f"at least 2, covering {MIN_POSES_COVERAGE:.0%} of the node stamps"),
         ("demo --width", f"{MIN_DEMO_WIDTH} to {MAX_DEMO_WIDTH}"),
         ("demo --seed", f"0 to {MAX_SEED}"),
     ]

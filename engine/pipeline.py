@@ -169,6 +169,9 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     from .loops import detect_loops
     from .nodes import make_nodes
 
+    from .validate import map_params
+
+    map_params(params)
     if len(descs) == 0:
         raise InputError("no descriptors to map")
     if params.method == "verified" and params.node_sim_th is None:

@@ -94,6 +94,27 @@ def dense_nodes(count: int, method: str) -> None:
                          f"--interval or a higher --node-sim-th")
 
 
+def poses_cover(poses, stamps, where: str = "poses") -> None:
+    """Refuse ground truth that cannot place the map's nodes: fewer than two poses, or a
+    time span that covers less than ``limits.MIN_POSES_COVERAGE`` of the node stamps (the
+    positions of the others would be clamped to the ends: meaningless metrics; usually the
+    poses are on another clock than the recording)."""
+    import numpy as np
+
+    if len(poses) < 2:
+        raise InputError(f"{where}: {len(poses)} pose(s); at least two are needed to place the map's nodes")
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if stamps.size == 0:
+        return
+    t0, t1 = float(poses.t[0]), float(poses.t[-1])
+    slack = (t1 - t0) / max(len(poses) - 1, 1)   # one pose period at either end
+    inside = float(np.mean((stamps >= t0 - slack) & (stamps <= t1 + slack)))
+    if inside < limits.MIN_POSES_COVERAGE:
+        raise InputError(f"{where}: the poses span {t0:.3f}..{t1:.3f} s but only {inside:.0%} of the map's "
+                         f"nodes ({float(stamps.min()):.3f}..{float(stamps.max()):.3f} s) fall in it; "
+                         f"are they on the recording's clock?")
+
+
 # --- frames -----------------------------------------------------------------------------
 
 def frame_size(width: int, height: int, where: str) -> None:
@@ -106,18 +127,23 @@ def frame_size(width: int, height: int, where: str) -> None:
                          f"(at least {limits.MIN_FRAME_WIDTH}x{limits.MIN_FRAME_HEIGHT})")
 
 
-def image_file_size(path: Path) -> Optional[tuple[int, int]]:
-    """(width, height) of an image file from its header only (Pillow reads lazily), or
-    None when Pillow cannot tell (the decoder will then say what is wrong)."""
+def image_file_size(source) -> Optional[tuple[int, int]]:
+    """(width, height) of an image (a path or a binary file) from its header only (Pillow
+    reads lazily), or None when Pillow cannot tell (the decoder then says what is wrong).
+    Pillow's own bomb check is off meanwhile: the caller compares the size with the limits."""
     try:
         from PIL import Image
     except ImportError:
         return None
+    bomb_limit = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
     try:
-        with Image.open(path) as im:
+        with Image.open(source) as im:
             return int(im.size[0]), int(im.size[1])
     except Exception:  # not an image Pillow knows (or corrupt): leave it to the decoder
         return None
+    finally:
+        Image.MAX_IMAGE_PIXELS = bomb_limit
 
 
 # --- descriptor options (command line and session files) -----------------------------------

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
-from ..validate import frame_size
+from ..validate import frame_size, image_file_size
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = (
@@ -214,13 +214,7 @@ def message_size(msg: Any, msgtype: str) -> Optional[tuple[int, int]]:
     or a CompressedImage's JPEG/PNG header (None when the header cannot be read)."""
     if msgtype != "sensor_msgs/msg/CompressedImage":
         return int(msg.width), int(msg.height)
-    try:
-        from PIL import Image
-
-        with Image.open(io.BytesIO(bytes(msg.data))) as im:
-            return int(im.size[0]), int(im.size[1])
-    except Exception:  # unknown or corrupt header: the decoder says what is wrong
-        return None
+    return image_file_size(io.BytesIO(bytes(msg.data)))
 
 
 def recovery_hint(path: Path) -> str:
