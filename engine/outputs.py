@@ -27,7 +27,7 @@ import tempfile
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Optional
 
-from .errors import InputError
+from .errors import OutputError
 
 # The mode a new file gets before the umask is applied (what open(..., "w") asks for).
 NEW_FILE_MODE = 0o666
@@ -65,7 +65,7 @@ def check_output(path: str | Path, inputs: Iterable[Optional[str | Path]] = ()) 
     path = Path(path)
     for src in inputs:
         if src is not None and _same_file(path, Path(src)):
-            raise InputError(f"{path}: the output is the same file as the input {src}; "
+            raise OutputError(f"{path}: the output is the same file as the input {src}; "
                              f"choose another output name")
     target = Path(os.path.realpath(path)) if path.is_symlink() else path
     try:
@@ -73,12 +73,12 @@ def check_output(path: str | Path, inputs: Iterable[Optional[str | Path]] = ()) 
     except FileNotFoundError:
         st = None
     except OSError as exc:
-        raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+        raise OutputError(f"{path}: cannot write ({exc.strerror})") from None
     if st is not None and not stat.S_ISREG(st.st_mode):
         kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-        raise InputError(f"{path}: cannot write the output there, it is {kind}")
+        raise OutputError(f"{path}: cannot write the output there, it is {kind}")
     if not target.parent.is_dir():
-        raise InputError(f"{path}: cannot write, the folder {target.parent} does not exist")
+        raise OutputError(f"{path}: cannot write, the folder {target.parent} does not exist")
     return target
 
 
@@ -96,7 +96,7 @@ def write_atomically(path: str | Path, write: Callable[[BinaryIO], None],
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     except OSError as exc:
-        raise InputError(f"{path}: cannot write ({exc.strerror})") from None
+        raise OutputError(f"{path}: cannot write ({exc.strerror})") from None
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
@@ -110,7 +110,7 @@ def write_atomically(path: str | Path, write: Callable[[BinaryIO], None],
         except OSError:
             pass
         if isinstance(exc, OSError):
-            raise InputError(f"{path}: cannot write ({exc.strerror or exc.__class__.__name__})") from None
+            raise OutputError(f"{path}: cannot write ({exc.strerror or exc.__class__.__name__})") from None
         raise
     sync_folder(target.parent)
     return target
