@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 
 from engine.synth.writers import write_ros1_bag, write_video
+from test_sources_data import ros1_image, write_messages_bag
 
 ROOT = Path(__file__).resolve().parent.parent
 W, H = 128, 64
@@ -77,6 +78,7 @@ def data(tmp_path_factory) -> Path:
     frames = [rng.integers(0, 255, (H, W, 3), dtype=np.uint8) for _ in range(12)]
     write_video(d / "v.avi", frames, 10.0)
     write_ros1_bag(d / "r.bag", frames[:4], [1.0, 2.0, 3.0, 4.0])
+    write_messages_bag(d / "zero.bag", [("/cam", 1.0, ros1_image(np.zeros((0, 0, 3), np.uint8), 1.0))])
     (d / "tiny").mkdir()
     for k in range(3):
         cv2.imwrite(str(d / "tiny" / f"{k}.png"), np.zeros((1, 2, 3), np.uint8))
@@ -139,6 +141,7 @@ MAP = [
     (["v.avi", "--method", "ours", "--loop-sim-th", "-3"], "--loop-sim-th"),
     (["tiny"], "too small"),
     (["huge"], "30000x15000"),
+    (["zero.bag"], "zero.bag: frame 0"),
     (["meta_list.npz"], "meta"),
     (["fw_text.npz"], "frame_width"),
     (["nan.npz"], "not finite"),
