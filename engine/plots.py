@@ -110,7 +110,8 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
         axm.set_xlim(-0.5, m - 0.5)
         axm.set_ylim(m - 0.5, -0.5)
         axm.set_aspect("equal")
-        axm.set_title("loops by node index (no descriptors)", fontsize=10)
+        why = "no descriptors" if topomap.node_vectors is None or not m else f"over {MAX_DENSE_NODES:,} nodes"
+        axm.set_title(f"loops by node index ({why})", fontsize=10)
     if evaluation is not None and evaluation.fn_pairs:
         fn = np.asarray(evaluation.fn_pairs)
         axm.scatter(fn[:, 1], fn[:, 0], s=6, color=COLOURS["FN"], alpha=0.5, marker="s",
