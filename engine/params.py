@@ -12,6 +12,8 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Optional
 
+from .limits import MAX_COSINE, MAX_NODE_COUNT_PARAM, MIN_COSINE
+
 METHODS = ("simple", "shift-simple", "ours", "verified", "verified-rules")
 # Methods whose descriptors are computed on panorama-shifted frames.
 SHIFTED_METHODS = ("shift-simple", "ours", "verified", "verified-rules")
@@ -49,16 +51,17 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("node_sim_th", float, None, _ALL,
               "node similarity threshold: a frame starts a new node when its cosine to the last "
               "node drops below it (None: the descriptor's default; verified: from the recording)",
-              "paper section 3; calibrated per descriptor", -1.0, 1.0),
+              "paper section 3; calibrated per descriptor", MIN_COSINE, MAX_COSINE),
     Parameter("loop_sim_th", float, None, PAPER_METHODS,
               "loop similarity threshold of the paper's methods (None: the descriptor's default)",
-              "paper section 4; calibrated per descriptor", -1.0, 1.0),
+              "paper section 4; calibrated per descriptor", MIN_COSINE, MAX_COSINE),
     Parameter("window_size", int, 5, ("ours",), "window of the spatial consistency check",
-              "paper section 4", 1, 1000),
-    Parameter("count_th", int, 2, ("ours",), "loops needed inside the window", "paper section 4", 1, 1000),
+              "paper section 4", 1, MAX_NODE_COUNT_PARAM),
+    Parameter("count_th", int, 2, ("ours",), "loops needed inside the window", "paper section 4",
+              0, MAX_NODE_COUNT_PARAM),
     Parameter("neighbor_node_num", int, 5, _ALL,
               "temporal neighbours: nodes this close along the path are never a loop",
-              "paper section 4", 0, 100_000),
+              "paper section 4", 0, MAX_NODE_COUNT_PARAM),
     Parameter("long_runs", bool, True, ("verified-rules",),
               "verified-rules step 5: returns with a lateral offset", "first round"),
     Parameter("retrieval_k", int, 10, _NEW,
@@ -132,20 +135,24 @@ class MapParams:
     def uses_shift(self) -> bool:
         return self.method != "simple"
 
-    def problems(self) -> list[str]:
-        """What is wrong with these values, one line each (empty when all are valid)."""
+    def problems(self) -> list[tuple[str, str]]:
+        """(field, what is wrong) for every value outside its declared type or range."""
         out = []
         if self.method not in METHODS:
-            out.append(f"method must be one of {', '.join(METHODS)}, got {self.method!r}")
+            out.append(("method", f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}"))
         for f in fields(self):
             p = BY_NAME[f.name]
             v = getattr(self, f.name)
             if v is None or p.type in (str, bool):
                 continue
-            if isinstance(v, float) and not math.isfinite(v):
-                out.append(f"{p.name} must be a finite number, got {v}")
-            elif p.minimum is not None and v < p.minimum or p.maximum is not None and v > p.maximum:
-                out.append(f"{p.name} must lie in [{p.minimum:g}, {p.maximum:g}], got {v:g}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                out.append((p.name, f"expected a number, got {v!r}"))
+            elif p.type is int and v != int(v):
+                out.append((p.name, f"expected a whole number, got {v!r}"))
+            elif not math.isfinite(v):
+                out.append((p.name, f"must be a finite number, got {v}"))
+            elif (p.minimum is not None and v < p.minimum) or (p.maximum is not None and v > p.maximum):
+                out.append((p.name, f"must lie in [{p.minimum:g}, {p.maximum:g}], got {v:g}"))
         return out
 
 

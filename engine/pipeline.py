@@ -28,6 +28,7 @@ class DescribeSettings:
     topic: Optional[str] = None
     shift: bool = True
     options: dict = field(default_factory=dict)  # passed to the descriptor model
+    skip_bad_frames: bool = False  # skip undecodable frames (listed in meta "skipped_frames")
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -60,6 +61,9 @@ def describe(
     if not path.exists():
         raise InputError(f"{path}: no such file or directory")
 
+    from .validate import interval as check_interval
+
+    check_interval(settings.interval, "interval")
     model = descriptor_registry.get(settings.descriptor, **settings.options)
     key = None
     if cache is not None:
@@ -70,10 +74,16 @@ def describe(
         if hit is not None:
             return hit
 
+    from .frame_guard import check_describe_memory, checked_frames
+
     with open_source(path, topic=settings.topic, interval=settings.interval) as source:
         expected = source.expected_samples(settings.interval)
-        result = describe_frames(source.frames(settings.interval), expected, settings,
+        check_describe_memory(expected, model, str(path))
+        skipped: list[int] = []
+        frames = checked_frames(source, settings.interval, settings.skip_bad_frames, skipped)
+        result = describe_frames(frames, expected, settings,
                                  model=model, source=str(path), progress=progress, cancel=cancel)
+        result.meta["skipped_frames"] = skipped
     if cache is not None and key is not None:
         cache.store(key, result)
     return result
@@ -175,6 +185,9 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     from .loops import detect_loops
     from .nodes import make_nodes
 
+    from .validate import map_params
+
+    map_params(params)
     if len(descs) == 0:
         raise InputError("no descriptors to map")
     if params.method in ("verified", "verified-rules") and params.node_sim_th is None:

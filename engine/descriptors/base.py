@@ -59,22 +59,24 @@ class Descriptors:
     def save(self, path: str | Path, vector_dtype=np.float32) -> None:
         """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
         contract's files (``panotopo describe``) keep float32."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(
-            tmp,
+        from ..outputs import write_atomically  # random temp name, umask mode, atomic
+
+        write_atomically(path, lambda f: np.savez(
+            f,
             stamps=np.asarray(self.stamps, np.float64),
             frames=np.asarray(self.frames, np.int64),
             shifts=np.asarray(self.shifts, np.int64),
             descriptors=np.asarray(self.vectors, vector_dtype),
             meta=np.array(json.dumps(self.meta)),
             **self.optional_arrays(),
-        )
-        tmp.replace(path)  # atomic: a crash never leaves half a file
+        ))
 
     @classmethod
     def load(cls, path: str | Path) -> "Descriptors":
+        from ..npz_guard import check_archive, check_contents
+
         path = Path(path)
+        check_archive(path)  # a zip bomb or a lying header is refused before loading
         try:
             with np.load(path, allow_pickle=False) as z:
                 missing = {"stamps", "frames", "shifts", "descriptors", "meta"} - set(z.files)
@@ -107,6 +109,7 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
         if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape[0] != n):
             raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
+        check_contents(d, path)
         return d
 
 

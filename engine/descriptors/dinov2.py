@@ -352,8 +352,9 @@ def load_dinov2(backbone: str, weights: Optional[str | os.PathLike] = None,
         if not allow_download:
             raise InputError(missing_weights_message(arch))
         try:
+            # weights_only: a downloaded file is data, never code (issue 16, finding 8).
             state = torch.hub.load_state_dict_from_url(arch.url, map_location="cpu",
-                                                       file_name=arch.checkpoint_name)
+                                                       file_name=arch.checkpoint_name, weights_only=True)
         except Exception as exc:
             raise InputError(f"cannot download {arch.checkpoint_name} ({exc.__class__.__name__}): "
                              f"{missing_weights_message(arch)}") from None

@@ -50,6 +50,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular
 from ..poses import Poses
+from ..validate import frame_size, image_file_size
 from .exif import PhotoTags, read_photo_tags
 from .geo import heading_to_yaw, local_metres
 
@@ -181,6 +182,9 @@ class FolderSource(IndexedSource):
 
     def _read(self, index: int) -> np.ndarray:
         file = self.files[index]
+        size = image_file_size(file)  # from the header: refuse a huge image before decoding it
+        if size is not None:
+            frame_size(*size, str(file))
         bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
         if bgr is None:
             raise InputError(f"{file}: unreadable or corrupt image")

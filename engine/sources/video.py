@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, FrameSource, check_equirectangular
+from ..validate import frame_size
 from .video_av import AvSampler, AvUnavailable
 
 # FFmpeg prints its own line for a broken file ("moov atom not found") before our one-line
@@ -67,6 +68,13 @@ class VideoSource(FrameSource):
         if not self.path.is_file():
             raise InputError(f"{self.path}: no such file")
         self._cap = _open_capture(self.path)
+        size = (int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        if size[0] > 0 and size[1] > 0:  # from the container's header: refuse before decoding
+            try:
+                frame_size(*size, str(self.path))
+            except InputError:
+                self._cap.release()
+                raise
         self._lock = threading.Lock()
         self.fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
         self._stamps: Optional[np.ndarray] = None
