@@ -35,8 +35,8 @@ from .features import FeatureTable, LocalFeatures
 RATIO = 0.8
 # Inlier threshold: angle (radians) between a bearing and the model's prediction (the
 # rotated bearing, or the epipolar great circle). 0.015 rad = 0.86 degree, about one pixel
-# at the 384-column working width of engine.features: SIFT locates keypoints to a fraction
-# of a pixel, resampling and a rolling shutter add a little.
+# of the image SIFT works on (engine.features: 256 columns, doubled inside SIFT): keypoints
+# are located to a fraction of that; resampling and a rolling shutter add a little.
 THRESHOLD = 0.015
 # RANSAC: hypotheses are drawn and scored in batches; sampling stops when the best inlier
 # ratio w so far makes a fully clean sample likely (1 - (1 - w^s)^n >= CONFIDENCE), or at

@@ -6,7 +6,7 @@ import pytest
 
 from engine.descriptors.base import Descriptors
 from engine.errors import InputError
-from engine.features import BAND, FEATURES_MAX, FeatureTable, LocalFeatures, extract
+from engine.features import BAND, FEATURES_MAX, WORK_WIDTH, FeatureTable, LocalFeatures, extract
 from engine.frames import Frame
 from engine.pipeline import DescribeSettings, describe_frames
 from engine.shift import apply_shift
@@ -44,7 +44,7 @@ def test_rolling_the_frame_rolls_the_features(pano, feats):
     # whole number of its pixels, so a few weak ones change).
     d = np.abs(moved[:, None] - rolled.uv[None, :, 0])
     d = np.minimum(d, 1 - d) + np.abs(feats.uv[:, None, 1] - rolled.uv[None, :, 1])
-    assert np.mean(d.min(axis=1) < 2 / 384) > 0.7
+    assert np.mean(d.min(axis=1) < 2 / WORK_WIDTH) > 0.7
 
 
 def test_bad_image_gives_one_clear_line():
