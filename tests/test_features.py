@@ -73,6 +73,8 @@ def test_feature_table_round_trips_through_a_descriptors_file(tmp_path, pano, fe
         a, b = table.of(i), back.of(i)
         assert np.array_equal(a.desc, b.desc)
         assert np.abs(a.uv - b.uv).max() < 1e-3 and np.all(b.uv < 1.0)
+    picked = back.subset([2, 0])       # e.g. the node rows of a map
+    assert len(picked) == 2 and np.array_equal(picked.of(0).desc, back.of(2).desc)
 
 
 def test_files_without_features_still_load(tmp_path):
