@@ -225,7 +225,7 @@ def _essential_fit(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     if rows.shape[1] == 8:
         e = _null_vectors(rows)
     else:
-        e = np.linalg.svd(rows, full_matrices=True)[2][:, -1, :]
+        e = np.linalg.svd(rows, full_matrices=False)[2][:, -1, :]   # (no k x k U for k inliers)
     return _nearest_essential(e.reshape(-1, 3, 3))
 
 
