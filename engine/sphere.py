@@ -38,15 +38,21 @@ RATIO = 0.8
 # of the image SIFT works on (engine.features: 256 columns, doubled inside SIFT): keypoints
 # are located to a fraction of that; resampling and a rolling shutter add a little.
 THRESHOLD = 0.015
-# RANSAC: hypotheses are drawn and scored in batches; sampling stops when the best inlier
-# ratio w so far makes a fully clean sample likely (1 - (1 - w^s)^n >= CONFIDENCE), or at
+# RANSAC: hypotheses are drawn and scored in batches (the first BATCH = 32, later 8 * BATCH:
+# a clean pair stops after the first, and each batch costs a fixed ~0.2 ms of numpy calls);
+# sampling stops when a fully clean sample of a model with w = max(best inliers so far,
+# floor) / matches would have been drawn with CONFIDENCE (1 - (1 - w^s)^n), or at the cap.
+# The floor is the fewest inliers that could change the result (MIN_INLIERS; for the
+# rotation, which is fitted second, ROTATION_SHARE of the essential model's inliers), so a
+# pair whose best model stays below it costs the draws that rule such a model out, not
 # the cap. Caps: 2-point rotation 256 draws (a clean sample for w = 0.15 with 99.7 %); 8-point
 # essential 1024 draws (w = 0.5 with 98 %, w = 0.4 with 49 %). Mutual matches that pass the
 # ratio test are mostly right on real revisits (GoPro MAX steps of 1-9 m: 58-89 % inliers), so
 # the cap is rarely reached there; a pair with 70 % wrong matches usually fails (that is weak
-# evidence anyway). Costs: benchmarks/bench_sphere.py.
+# evidence anyway); false pairs with 20-60 matches reach it (the worst case, ~5-7 ms).
+# Costs per pair (CPU, one thread): benchmarks/bench_sphere.py, benchmarks/results/sphere.md.
 CONFIDENCE = 0.99
-BATCH = 64
+BATCH = 32
 ROTATION_DRAWS = 256
 ESSENTIAL_DRAWS = 1024
 REFINE_STEPS = 2
@@ -56,9 +62,12 @@ REFINE_STEPS = 2
 # ROTATION_SHARE of the essential model's inliers. Measured (rotation / essential inliers):
 # a roll of tests/data/examplepano_1024.jpg 232/233; a real 1 m step (GoPro MAX 1 -> 2) 55/119;
 # synthetic 1 m steps with scenery 2-10 m away 6/180 .. 10/170 (tests/test_sphere.py cases).
+# The essential model is fitted first: on a moving camera (most pairs) the rotation's RANSAC
+# then needs a handful of draws to rule out a rotation with ROTATION_SHARE of its inliers.
 ROTATION_SHARE = 0.8
 # Below this many inliers neither model is reported ("none"): an 8-point model always
-# fits its own sample, so 8 inliers and 2 more say nothing. Not a loop threshold.
+# fits its own sample, so 8 inliers and 2 more say nothing. Not a loop threshold. A pair with
+# fewer matches than this is "none" without any fitting (inliers 0).
 MIN_INLIERS = 10
 MODEL_CODES = {"none": 0, "rotation": 1, "essential": 2}
 
@@ -198,7 +207,7 @@ def _null_vectors(rows: np.ndarray) -> np.ndarray:
     x[:, 8] = 1.0
     for i in range(7, -1, -1):       # Q e_9 = H_0 H_1 ... H_7 e_9, H_i = I - tau_i v_i v_i^T
         vi = v[:, i]
-        x -= (tau[:, i] * (vi * x).sum(axis=1))[:, None] * vi
+        x -= (tau[:, i] * np.einsum("hj,hj->h", vi, x))[:, None] * vi   # (einsum: sum(axis=1) of short rows is slow)
     return x
 
 
@@ -235,20 +244,22 @@ def _outer(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (x[:, :, None] * y[:, None, :]).reshape(-1, 9)
 
 
-def _rotation_errors(r: np.ndarray, ba: np.ndarray) -> np.ndarray:
-    """Chord |R a - b| (h, m) (~ the angle for small ones): |R a - b|^2 = 2 - 2 b^T R a;
-    ``ba`` = ``_outer(b, a)``."""
-    dot = (ba @ r.reshape(-1, 9).T).T
-    return np.sqrt(np.maximum(2.0 - 2.0 * dot, 0.0))
+def _rotation_inliers(r: np.ndarray, ba: np.ndarray, threshold: float) -> np.ndarray:
+    """Inliers (h, m) of rotations: chord |R a - b| < threshold (~ the angle for small ones),
+    i.e. b^T R a > 1 - threshold^2 / 2 (|R a - b|^2 = 2 - 2 b^T R a); ``ba`` = ``_outer(b, a)``."""
+    return (ba @ r.reshape(-1, 9).T).T > 1.0 - 0.5 * threshold * threshold
 
 
-def _epipolar_errors(e: np.ndarray, ba: np.ndarray, aa: np.ndarray, bb: np.ndarray) -> np.ndarray:
-    """Sine of the larger angle (h, m) of b from a's epipolar great circle and of a from b's:
-    |b^T E a| / |E a| and |b^T E a| / |E^T b| (``ba``, ``aa``, ``bb``: ``_outer`` of the bearings)."""
+def _epipolar_inliers(e: np.ndarray, ba: np.ndarray, aa: np.ndarray, bb: np.ndarray,
+                      threshold: float) -> np.ndarray:
+    """Inliers (h, m) of essential matrices: the sine of the larger angle of b from a's
+    epipolar great circle and of a from b's, |b^T E a| / |E a| and |b^T E a| / |E^T b|, below
+    ``threshold`` (compared squared: no root or division per match and hypothesis;
+    ``ba``, ``aa``, ``bb``: ``_outer`` of the bearings)."""
     r = ba @ e.reshape(-1, 9).T                                      # (m, h)
     ea2 = aa @ np.matmul(e.transpose(0, 2, 1), e).reshape(-1, 9).T  # |E a|^2
     eb2 = bb @ np.matmul(e, e.transpose(0, 2, 1)).reshape(-1, 9).T  # |E^T b|^2
-    return (np.abs(r) / np.sqrt(np.maximum(np.minimum(ea2, eb2), 1e-24))).T
+    return (r * r < (threshold * threshold) * np.maximum(np.minimum(ea2, eb2), 1e-24)).T
 
 
 def _samples(rng: np.random.Generator, h: int, m: int, k: int) -> np.ndarray:
@@ -263,9 +274,9 @@ def _samples(rng: np.random.Generator, h: int, m: int, k: int) -> np.ndarray:
     return out
 
 
-def _ransac(a, b, rng, k, draws, fit, errors, threshold, floor=0):
+def _ransac(a, b, rng, k, draws, fit, inliers, floor=0):
     """Best model of ``fit`` (minimal samples of ``k``), then refined on its inliers.
-    ``errors(models)`` gives (h, m) errors of all matches.
+    ``inliers(models)`` gives the (h, m) inlier masks of all matches.
 
     Sampling stops once a model with ``max(best so far, floor)`` inliers would have been
     drawn cleanly with ``CONFIDENCE``: ``floor`` is the fewest inliers that could change
@@ -274,29 +285,32 @@ def _ransac(a, b, rng, k, draws, fit, errors, threshold, floor=0):
     """
     m = a.shape[0]
     best_model, best_mask, best_count, done = None, np.zeros(m, bool), -1, 0
-    needed = draws
-    while done < min(draws, needed):
+
+    def draws_needed(count):
+        fail = 1.0 - (max(count, floor) / m) ** k
+        if fail <= 0.0:
+            return 1
+        return int(min(draws, max(1.0, np.ceil(np.log(1.0 - CONFIDENCE) / np.log(fail)))))
+
+    needed = draws_needed(0)
+    while done < needed:
         # The first batch is small (clean pairs stop after it); later ones larger, as each
         # batch costs some fixed numpy overhead.
-        h = min(BATCH if done == 0 else 4 * BATCH, min(draws, needed) - done)
+        h = min(BATCH if done == 0 else 8 * BATCH, needed - done)
         idx = _samples(rng, h, m, k)
         models = fit(a[idx], b[idx])
-        inl = errors(models) < threshold
+        inl = inliers(models)
         counts = inl.sum(axis=1)
         j = int(np.argmax(counts))
         if counts[j] > best_count:
             best_model, best_mask, best_count = models[j], inl[j], int(counts[j])
         done += h
-        fail = 1.0 - (max(best_count, floor) / m) ** k
-        if fail <= 0.0:
-            needed = 0
-        elif fail < 1.0:
-            needed = int(min(draws, np.ceil(np.log(1.0 - CONFIDENCE) / np.log(fail))))
+        needed = draws_needed(best_count)
     for _ in range(REFINE_STEPS):   # least squares on all inliers usually gains a few
         if best_count < k:
             break
         model = fit(a[best_mask][None], b[best_mask][None])
-        inl = errors(model)[0] < threshold
+        inl = inliers(model)[0]
         if inl.sum() < best_count:
             break
         best_model, best_mask, best_count = model[0], inl, int(inl.sum())
@@ -345,13 +359,13 @@ def two_view(fa: LocalFeatures, fb: LocalFeatures, seed: int = 0) -> TwoView:
     rng = np.random.default_rng(seed)
     ba, aa, bb = _outer(b, a), _outer(a, a), _outer(b, b)
     ess, ess_mask, ess_n = _ransac(a, b, rng, 8, ESSENTIAL_DRAWS, _essential_fit,
-                                   lambda e: _epipolar_errors(e, ba, aa, bb), THRESHOLD, floor=MIN_INLIERS)
+                                   lambda e: _epipolar_inliers(e, ba, aa, bb, THRESHOLD), floor=MIN_INLIERS)
     # The rotation is chosen only with at least ROTATION_SHARE of the essential model's
     # inliers (and MIN_INLIERS): its RANSAC need only rule out models of that size, which
     # for a moving camera (most pairs) takes one batch instead of all ROTATION_DRAWS.
     rot_floor = max(MIN_INLIERS, int(np.ceil(ROTATION_SHARE * ess_n)))   # <= m
     rot, rot_mask, rot_n = _ransac(a, b, rng, 2, ROTATION_DRAWS, _rotation_fit,
-                                   lambda r: _rotation_errors(r, ba), THRESHOLD, floor=rot_floor)
+                                   lambda r: _rotation_inliers(r, ba, THRESHOLD), floor=rot_floor)
     if rot_n >= ROTATION_SHARE * ess_n:
         model, mask, r, t = "rotation", rot_mask, rot, None
     else:
