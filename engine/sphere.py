@@ -24,6 +24,7 @@ Conventions (all in one place):
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Optional
 
@@ -70,6 +71,24 @@ ROTATION_SHARE = 0.8
 # fewer matches than this is "none" without any fitting (inliers 0).
 MIN_INLIERS = 10
 MODEL_CODES = {"none": 0, "rotation": 1, "essential": 2}
+
+
+_blas = None
+
+
+def _one_blas_thread():
+    """A context with BLAS on one thread. The products here are tiny (9 columns, a few
+    hundred rows); OpenBLAS splits them over its threads anyway, and on the shared 2-core
+    machine that cost ~5 times the CPU of one thread (bench_sphere.py --pairs: 15 vs 3 ms
+    per pair). ~10 us to enter (threadpoolctl); no limit when it is not installed."""
+    global _blas
+    if _blas is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+            _blas = ThreadpoolController()
+        except ImportError:      # pragma: no cover - a declared dependency
+            _blas = False
+    return _blas.limit(limits=1, user_api="blas") if _blas else contextlib.nullcontext()
 
 
 @dataclass
@@ -347,8 +366,14 @@ def two_view(fa: LocalFeatures, fb: LocalFeatures, seed: int = 0) -> TwoView:
     """Match two frames' features and fit the better of an essential matrix and a pure rotation.
 
     Deterministic for a given ``seed``. See the module notes for the conventions and
-    ``ROTATION_SHARE`` / ``MIN_INLIERS`` for the choice of model.
+    ``ROTATION_SHARE`` / ``MIN_INLIERS`` for the choice of model. BLAS runs on one thread
+    meanwhile (``_one_blas_thread``).
     """
+    with _one_blas_thread():
+        return _two_view(fa, fb, seed)
+
+
+def _two_view(fa: LocalFeatures, fb: LocalFeatures, seed: int) -> TwoView:
     ia, ib = match(fa, fb)
     m = int(ia.size)
     uv_a, uv_b = fa.uv[ia].astype(np.float32), fb.uv[ib].astype(np.float32)
