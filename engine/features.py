@@ -6,16 +6,21 @@ keeps the features of a whole recording in three arrays (saved in the descriptor
 .npz as ``feat_offsets``, ``feat_uv``, ``feat_desc``).
 
 Choices (all in one place):
-- SIFT (OpenCV main module) on the grey frame downscaled to ``WORK_WIDTH`` = 384 columns
-  (~0.9 degree per pixel; SIFT doubles the image internally, so keypoints are located to
-  a fraction of that). Measured on tests/data/examplepano_1024.jpg on one busy core: SIFT
-  takes ~11 ms at 256 columns (but finds < 260 keypoints), ~20 ms at 384, ~30 ms at 512;
-  384 is the smallest width that still fills ``FEATURES_MAX`` on a real panorama.
-  ``CONTRAST`` = 0.02 (OpenCV's default is 0.04) keeps keypoints in low-contrast indoor
-  scenes; the strongest ``FEATURES_MAX`` are kept anyway.
+- SIFT (OpenCV main module) on the grey frame downscaled to ``WORK_WIDTH`` = 256 columns
+  (1.4 degrees per pixel; SIFT doubles the image internally, so the finest keypoints are
+  located to a fraction of 0.7 degree). Cost, measured with benchmarks/bench_sphere.py and
+  one-off runs on tests/data/examplepano_1024.jpg on the shared 2-core machine under
+  a load of ~8: ~40 ms per 1024x512 frame at 256 columns, ~80 ms at 384 columns, while
+  the default descriptor (effnet-vlad) took ~43 ms per frame at the same moment. 384 columns
+  found more features on the panorama (335 vs 183) and about the same on real GoPro MAX
+  frames (~350 vs ~320) and the same inliers on their 1 m and 9 m steps; 256 keeps
+  extraction at about the descriptor's cost. ``CONTRAST`` = 0.02 (OpenCV's default is
+  0.04) keeps keypoints in low-contrast indoor scenes; the strongest ``FEATURES_MAX``
+  are kept anyway.
 - The panorama wraps: the frame is padded with ``WRAP_PAD`` columns from the other
   side, so keypoints at the seam keep their full support; keypoints are only taken
-  from the original columns (mask), so none is found twice.
+  from the original columns (mask), so none is found twice. Rows outside the band (below)
+  are cut off before SIFT, but for ``WRAP_PAD`` rows of support.
 - Only rows in ``BAND`` (fractions of the height) give keypoints: above 0.08 (within
   ~14 degrees of the zenith) the projection stretches the image more than 3.5 times
   horizontally, so SIFT's scale/orientation invariance does not hold; below 0.80
@@ -42,9 +47,9 @@ from .errors import InputError
 
 FEATURES_VERSION = 1          # bump when extraction changes (part of the descriptor cache key)
 FEATURES_MAX = 400
-WORK_WIDTH = 384
+WORK_WIDTH = 256
 CONTRAST = 0.02
-WRAP_PAD = 16                 # columns at WORK_WIDTH: a bit more than a large keypoint's radius
+WRAP_PAD = 16                 # pixels at WORK_WIDTH of support kept round the band and the seam
 BAND = (0.08, 0.80)
 ROOT_SCALE = 512.0
 DESC_DIM = 128
@@ -89,11 +94,14 @@ def extract(rgb: np.ndarray, max_features: int = FEATURES_MAX) -> LocalFeatures:
         new_h = max(2, int(round(h * WORK_WIDTH / w)))
         grey = cv2.resize(grey, (WORK_WIDTH, new_h), interpolation=cv2.INTER_AREA)
     gh, gw = grey.shape
-    pad = min(WRAP_PAD, gw // 2)
-    padded = np.concatenate([grey[:, gw - pad:], grey, grey[:, :pad]], axis=1)
-    mask = np.zeros(padded.shape, np.uint8)
     top, bottom = int(round(BAND[0] * gh)), int(round(BAND[1] * gh))
-    mask[top:bottom, pad:pad + gw] = 255
+    # SIFT only sees the band and a margin of support around it, and the seam wrapped round.
+    y0, y1 = max(0, top - WRAP_PAD), min(gh, bottom + WRAP_PAD)
+    pad = min(WRAP_PAD, gw // 2)
+    rows = grey[y0:y1]
+    padded = np.concatenate([rows[:, gw - pad:], rows, rows[:, :pad]], axis=1)
+    mask = np.zeros(padded.shape, np.uint8)
+    mask[top - y0:bottom - y0, pad:pad + gw] = 255
     sift = _detector()
     sift.setNFeatures(int(max_features))
     keypoints, desc = sift.detectAndCompute(padded, mask)
@@ -102,7 +110,7 @@ def extract(rgb: np.ndarray, max_features: int = FEATURES_MAX) -> LocalFeatures:
     xy = np.array([kp.pt for kp in keypoints], np.float64)
     # Pixel centres: pixel x covers [x - 0.5, x + 0.5), so column fraction is (x + 0.5) / W.
     u = ((xy[:, 0] - pad + 0.5) / gw) % 1.0
-    v = np.clip((xy[:, 1] + 0.5) / gh, 0.0, np.nextafter(1.0, 0.0))
+    v = np.clip((xy[:, 1] + y0 + 0.5) / gh, 0.0, np.nextafter(1.0, 0.0))
     keep = slice(0, int(max_features))   # OpenCV may keep ties beyond nfeatures
     return LocalFeatures(np.stack([u, v], axis=1)[keep].astype(np.float32), root_sift(desc)[keep])
 

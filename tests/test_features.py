@@ -6,7 +6,7 @@ import pytest
 
 from engine.descriptors.base import Descriptors
 from engine.errors import InputError
-from engine.features import BAND, FEATURES_MAX, FeatureTable, LocalFeatures, extract
+from engine.features import BAND, FEATURES_MAX, WORK_WIDTH, FeatureTable, LocalFeatures, extract
 from engine.frames import Frame
 from engine.pipeline import DescribeSettings, describe_frames
 from engine.shift import apply_shift
@@ -44,7 +44,7 @@ def test_rolling_the_frame_rolls_the_features(pano, feats):
     # whole number of its pixels, so a few weak ones change).
     d = np.abs(moved[:, None] - rolled.uv[None, :, 0])
     d = np.minimum(d, 1 - d) + np.abs(feats.uv[:, None, 1] - rolled.uv[None, :, 1])
-    assert np.mean(d.min(axis=1) < 2 / 384) > 0.7
+    assert np.mean(d.min(axis=1) < 2 / WORK_WIDTH) > 0.7
 
 
 def test_bad_image_gives_one_clear_line():
@@ -73,6 +73,8 @@ def test_feature_table_round_trips_through_a_descriptors_file(tmp_path, pano, fe
         a, b = table.of(i), back.of(i)
         assert np.array_equal(a.desc, b.desc)
         assert np.abs(a.uv - b.uv).max() < 1e-3 and np.all(b.uv < 1.0)
+    picked = back.subset([2, 0])       # e.g. the node rows of a map
+    assert len(picked) == 2 and np.array_equal(picked.of(0).desc, back.of(2).desc)
 
 
 def test_files_without_features_still_load(tmp_path):
