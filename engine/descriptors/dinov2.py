@@ -291,7 +291,7 @@ def _guess_arch(state: dict) -> Optional[Arch]:
     try:
         dim = int(state["cls_token"].shape[-1])
         depth = 1 + max(int(k.split(".")[1]) for k in state if k.startswith("blocks."))
-    except (KeyError, ValueError, IndexError, AttributeError):
+    except (KeyError, ValueError, IndexError, AttributeError, TypeError):
         return None
     regs = int(state["register_tokens"].shape[1]) if "register_tokens" in state else 0
     for arch in ARCHS.values():
@@ -322,6 +322,28 @@ def check_state_dict(model: DinoVisionTransformer, state: dict, where: str) -> N
     guess = _guess_arch(state)
     hint = f"; it looks like {guess.label}: use --backbone {guess.key}" if guess and guess != arch else ""
     raise InputError(f"{where}: not a DINOv2 {arch.label} checkpoint ({problem}){hint}")
+
+
+def checkpoint_arch(path: str | os.PathLike) -> Arch:
+    """The DINOv2 backbone a checkpoint holds, from its tensor shapes alone: width
+    (``cls_token``), depth (highest ``blocks.N``) and register tokens. The file is memory-mapped,
+    so even ViT-G/14's 4.5 GB are not read. InputError if it matches no known backbone."""
+    path = Path(path).expanduser()
+    try:
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        except RuntimeError:   # the legacy (pre-zip) format cannot be memory-mapped
+            state = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such DINOv2 checkpoint file") from None
+    except Exception as exc:
+        raise InputError(f"{path}: cannot read the DINOv2 checkpoint, the file is truncated or not "
+                         f"a PyTorch checkpoint ({exc.__class__.__name__})") from None
+    arch = _guess_arch(state) if isinstance(state, dict) else None
+    if arch is None:
+        raise InputError(f"{path}: not a DINOv2 checkpoint of a known backbone (ViT-S/B/L/G/14, "
+                         f"with or without registers); cannot tell its backbone from its tensors")
+    return arch
 
 
 def read_checkpoint(path: Path, arch: Arch) -> dict:
