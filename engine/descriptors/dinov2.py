@@ -286,6 +286,27 @@ def missing_weights_message(arch: Arch) -> str:
             f"{hub_checkpoint_dir()} or pass --weights FILE (see docs/anyloc.md)")
 
 
+def arch_of_state(state: dict, prefix: str = "") -> Optional[Arch]:
+    """The architecture of the DINOv2 weights under ``prefix`` in ``state``, read from tensor
+    shapes: a known backbone when width, depth and registers match one, else a custom one
+    (64 channels per head, as every DINOv2 size has; used for tiny test models). None if the
+    entries are not a DINOv2 layout."""
+    sub = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+    known = _guess_arch(sub)
+    if known is not None:
+        return known
+    try:
+        dim = int(sub["cls_token"].shape[-1])
+        depth = 1 + max(int(k.split(".")[1]) for k in sub if k.startswith("blocks."))
+    except (KeyError, ValueError, IndexError, AttributeError, TypeError):
+        return None
+    regs = int(sub["register_tokens"].shape[1]) if "register_tokens" in sub else 0
+    ffn = "swiglu" if "blocks.0.mlp.w12.weight" in sub else "mlp"
+    if dim % 64:
+        return None
+    return Arch(f"custom{dim}x{depth}", f"ViT-{dim}x{depth}/14", dim, depth, dim // 64, ffn, regs)
+
+
 def _guess_arch(state: dict) -> Optional[Arch]:
     """The architecture a state dict looks like (by width, depth and registers), if any."""
     try:
