@@ -2,11 +2,11 @@
 
 * ``pick_device``: "auto" = CUDA, else Apple MPS, else the CPU.
 * ``resolve_precision``: the autocast dtype of a (precision, device) pair. "auto" is bfloat16
-  autocast plus TF32 matmuls on CUDA (float16 where the GPU has no bfloat16), plain float32
-  elsewhere; "float32" forces float32 everywhere (TF32 off too); "bfloat16"/"float16" force
-  autocast (on the CPU too: that is how the CPU/GPU agreement under bfloat16 is measured on a
-  machine without a GPU).
-* ``compute`` : the context a forward pass runs in (inference mode, autocast, TF32 flags set and
+  autocast plus TF32 on CUDA (float16 where the GPU has no bfloat16), except for models that
+  cluster a map vocabulary from the recording, and plain float32 elsewhere; "float32" forces
+  float32 everywhere (TF32 off too); "bfloat16"/"float16" force autocast (on the CPU too: that
+  is how the CPU/GPU agreement under bfloat16 is measured on a machine without a GPU).
+* ``compute``: the context a forward pass runs in (inference mode, autocast, TF32 flags set and
   restored afterwards, so one model's choice never leaks into another's).
 * ``to_network_input``: uint8 RGB frames -> normalised float32 network input on the device,
   resized there (the host only copies bytes).
@@ -55,32 +55,39 @@ def check_precision(precision: Optional[str]) -> str:
     return precision
 
 
-def resolve_precision(precision: Optional[str], device: torch.device) -> Optional[torch.dtype]:
-    """Autocast dtype for ``precision`` on ``device``; None = plain float32.
+def resolve_precision(precision: Optional[str], device: torch.device,
+                      map_vocabulary: bool = False) -> Optional[torch.dtype]:
+    """Autocast dtype for ``precision`` on ``device``; None = plain float32 (TF32 off).
 
-    "auto" uses bfloat16 on CUDA because ViT features keep their ranking in it and it runs
-    the H100's tensor cores (model alone 255-350 frames/s for ViT-G/14 at 224 x 448 versus
-    ~4x slower in float32, measured for issue 15); float16 only where bfloat16 is missing
-    (pre-Ampere GPUs), since float16's small range can overflow in the deeper ViT blocks.
+    "auto" uses bfloat16 on CUDA because it runs the tensor cores (AnyLoc ViT-G/14 model alone
+    255-350 frames/s at 224 x 448 on an H100, issue 15); float16 only where bfloat16 is missing
+    (pre-Ampere GPUs). But "auto" stays float32 when the model clusters a map vocabulary from
+    the recording (``map_vocabulary``): k-means on bfloat16 features lands in another local
+    optimum than on float32 ones, and the descriptors then share almost nothing (effnet-vlad,
+    40 synthetic frames, CPU float32 vs bfloat16 autocast: row cosine median 0.12 with
+    k-means++, 0.90 even with seeds drawn by index), while float32 features that differ by
+    ~1e-6, as a GPU's without TF32 do, give the same centres (cosine > 0.9999999).
     """
     precision = check_precision(precision)
     if precision == "float32":
         return None
     if precision == "auto":
-        if device.type != "cuda":
+        if device.type != "cuda" or map_vocabulary:
             return None
         return torch.bfloat16 if torch.cuda.is_bf16_supported() else torch.float16
     return torch.bfloat16 if precision == "bfloat16" else torch.float16
 
 
 @contextlib.contextmanager
-def compute(device: torch.device, dtype: Optional[torch.dtype], tf32: bool) -> Iterator[None]:
-    """Inference mode, autocast to ``dtype`` (None: off) and TF32 matmuls on CUDA iff ``tf32``.
+def compute(device: torch.device, dtype: Optional[torch.dtype]) -> Iterator[None]:
+    """Inference mode and autocast to ``dtype``; on CUDA, TF32 matmuls and convolutions only
+    with autocast (``dtype`` not None).
 
     The global TF32 flags are restored on exit. cuDNN's own TF32 flag defaults to True, which
-    made float32 convolutions on CUDA differ from the CPU by ~1e-3 (issue 15): a forced
-    float32 run switches it off.
+    made float32 convolutions on CUDA differ from the CPU by ~1e-3 (issue 15): a float32 run
+    switches it off.
     """
+    tf32 = dtype is not None
     saved = None
     if device.type == "cuda":
         saved = (torch.backends.cuda.matmul.allow_tf32, torch.backends.cudnn.allow_tf32)

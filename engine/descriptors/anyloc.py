@@ -256,7 +256,7 @@ class _AnyLocBase(DescriptorModel):
             check(cancel)
             x = to_network_input(batch, (self.input_height, 2 * self.input_height), self.size,
                                  self.device, "AnyLoc")
-            with compute(self.device, self.dtype, tf32=self.precision != "float32"):
+            with compute(self.device, self.dtype):
                 feats = F.normalize(model.extract(x, self.layer, self.facet).float(), dim=-1)
             yield feats
             done += len(batch)
@@ -297,6 +297,7 @@ class AnyLocVLAD(_AnyLocBase):
         self.centers: Optional[np.ndarray] = None
         self.vocabulary_id = "map"
         self._resolve_vocabulary(vocabulary or "map")
+        self.dtype = resolve_precision(self.precision, self.device, map_vocabulary=self.centers is None)
 
     def _resolve_vocabulary(self, vocabulary: str) -> None:
         """Load a vocabulary file, or a domain name from AnyLoc's cache; "map" builds one later."""

@@ -171,7 +171,7 @@ class EfficientNetVLAD(DescriptorModel):
 
         self.device = pick_device(device)
         self.precision = check_precision(precision)
-        self.dtype = resolve_precision(self.precision, self.device)
+        self.dtype = resolve_precision(self.precision, self.device, map_vocabulary=vocabulary is None)
         self.stage = stage
         self.threads = threads
         self.seed = int(seed)
@@ -245,7 +245,7 @@ class EfficientNetVLAD(DescriptorModel):
         model = self.network()
         size = (self.input_height, self.input_width)
         x = to_network_input(batch, size, size, self.device, "effnet-vlad")
-        with compute(self.device, self.dtype, tf32=self.precision != "float32"):
+        with compute(self.device, self.dtype):
             # Same order as EfficientNet.extract_features: stem conv, BN, activation, blocks.
             y = model._swish(model._bn0(model._conv_stem(x)))
             for block in model._blocks[: self.last_block + 1]:

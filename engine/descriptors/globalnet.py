@@ -212,7 +212,7 @@ class GlobalNetDescriptor(DescriptorModel):
                 continue
             check(cancel)
             x = to_network_input(batch, self.size, self.size, self.device, self.name)
-            with compute(self.device, self.dtype, tf32=self.precision != "float32"):
+            with compute(self.device, self.dtype):
                 out = F.normalize(net(x).float(), dim=-1)
             rows.append(out.cpu().numpy())
             done += len(batch)
