@@ -41,14 +41,16 @@ def _assign(features: np.ndarray, centers: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _cluster_sums(features: np.ndarray, labels: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cluster sum of rows and row count, in chunks (one-hot matrix product per chunk)."""
+    """Per-cluster sum of rows (float64) and row count, in chunks (rows sorted by cluster, summed
+    per run: O(N C), where a one-hot product costs O(N C k))."""
     counts = np.bincount(labels, minlength=k)
     sums = np.zeros((k, features.shape[1]), dtype=np.float64)
     for start in range(0, features.shape[0], CHUNK):
         part = labels[start:start + CHUNK]
-        onehot = np.zeros((k, part.size), dtype=np.float64)
-        onehot[part, np.arange(part.size)] = 1.0
-        sums += onehot @ features[start:start + CHUNK].astype(np.float64)
+        order = np.argsort(part, kind="stable")
+        present = np.unique(part)
+        runs = np.searchsorted(part[order], present)
+        sums[present] += np.add.reduceat(features[start:start + CHUNK][order].astype(np.float64), runs, axis=0)
     return sums, counts
 
 
