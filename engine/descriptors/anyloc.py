@@ -16,7 +16,6 @@ Optionally both are projected by PCA (fitted on the recording's own descriptors)
 from __future__ import annotations
 
 import hashlib
-import itertools
 import os
 from pathlib import Path
 from typing import Iterable, Iterator, Optional
@@ -30,7 +29,7 @@ from ..progress import CancelToken, Progress, check, report
 from . import dinov2
 from .accel import (check_precision, compute, full_precision, pick_device, resolve_precision,
                     to_network_input)
-from .base import DescriptorModel
+from .base import DescriptorModel, in_batches
 from .mapvocab import pool_recording, sample_rows
 from .vlad import kmeans_cosine, l2_normalize, vlad
 from .vlad_torch import vlad_batch
@@ -245,23 +244,12 @@ class _AnyLocBase(DescriptorModel):
                        stage: str) -> Iterator[torch.Tensor]:
         """Unit patch features, float32 (B, h*w, C) on the device, ``batch_size`` images at a time."""
         model = self.backbone()
-        done = 0
-        batch: list[np.ndarray] = []
-        report(progress, 0, count, stage)
-        for rgb in itertools.chain(images, [None]):
-            if rgb is not None:
-                batch.append(rgb)
-            if not batch or (rgb is not None and len(batch) < self.batch_size):
-                continue
-            check(cancel)
+        for batch in in_batches(images, self.batch_size, count, progress, cancel, stage):
             x = to_network_input(batch, (self.input_height, 2 * self.input_height), self.size,
                                  self.device, "AnyLoc")
-            with compute(self.device, self.dtype):
+            with compute(self.device, self.dtype):   # never yield inside: the context would leak
                 feats = F.normalize(model.extract(x, self.layer, self.facet).float(), dim=-1)
             yield feats
-            done += len(batch)
-            batch = []
-            report(progress, done, max(count, done), stage)
 
     def _finish(self, rows: np.ndarray) -> np.ndarray:
         """Optional PCA, then float32 L2-normalised rows."""

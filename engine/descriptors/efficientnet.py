@@ -24,7 +24,6 @@ import contextlib
 import copy
 import hashlib
 import io
-import itertools
 import threading
 from typing import Iterable, Iterator, Optional
 
@@ -34,7 +33,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..progress import CancelToken, Progress, check, report
-from .base import DescriptorModel
+from .base import DescriptorModel, in_batches
 from .vlad import _assign, kmeans_cosine, l2_normalize, vlad
 
 if TYPE_CHECKING:
@@ -255,18 +254,8 @@ class EfficientNetVLAD(DescriptorModel):
     def feature_batches(self, images: Iterable[np.ndarray], count: int, progress: Optional[Progress],
                         cancel: Optional[CancelToken]) -> Iterator[torch.Tensor]:
         """``local_features`` of ``batch_size`` images at a time, with progress and cancel checks."""
-        done = 0
-        batch: list[np.ndarray] = []
-        report(progress, 0, count, "describe")
-        for rgb in itertools.chain(images, [None]):
-            if rgb is not None:
-                batch.append(rgb)
-            if batch and (rgb is None or len(batch) == self.batch_size):
-                check(cancel)
-                yield self.local_features(batch)
-                done += len(batch)
-                batch = []
-                report(progress, done, max(count, done), "describe")
+        for batch in in_batches(images, self.batch_size, count, progress, cancel, "describe"):
+            yield self.local_features(batch)
 
     # -- description ----------------------------------------------------------------
     def describe(

@@ -13,7 +13,6 @@ model is published there, or downloaded with ``allow_download`` (read with
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import struct
@@ -26,11 +25,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import InputError
-from ..progress import CancelToken, Progress, check, report
+from ..progress import CancelToken, Progress
 from . import dinov2
 from .accel import check_precision, compute, pick_device, resolve_precision, to_network_input
 from .anyloc import file_identity
-from .base import DescriptorModel
+from .base import DescriptorModel, in_batches
 
 
 def is_safetensors(path: Path) -> bool:
@@ -69,22 +68,7 @@ def read_state(path: Path, what: str) -> dict:
 def check_layout(model: nn.Module, state: dict, what: str, where: str, optional: Sequence[str] = ()) -> None:
     """InputError naming the first missing, unexpected or wrongly shaped entry, unless ``state``
     has exactly ``model``'s keys and shapes (``optional`` keys may be absent)."""
-    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-    problem = None
-    for key, shape in expected.items():
-        if key not in state:
-            if key in optional:
-                continue
-            problem = f"{key} is missing"
-            break
-        got = tuple(getattr(state[key], "shape", ()))
-        if got != shape:
-            problem = f"{key} has shape {got}, expected {shape}"
-            break
-    if problem is None:
-        extra = sorted(set(state) - set(expected))
-        if extra:
-            problem = f"unexpected entry {extra[0]}"
+    problem = dinov2.layout_problem(model, state, tuple(optional))
     if problem is not None:
         raise InputError(f"{where}: not a {what} checkpoint ({problem})")
 
@@ -202,22 +186,10 @@ class GlobalNetDescriptor(DescriptorModel):
                  cancel: Optional[CancelToken] = None) -> np.ndarray:
         net = self.network()
         rows: list[np.ndarray] = []
-        batch: list[np.ndarray] = []
-        done = 0
-        report(progress, 0, count, self.name)
-        for rgb in itertools.chain(images, [None]):
-            if rgb is not None:
-                batch.append(rgb)
-            if not batch or (rgb is not None and len(batch) < self.batch_size):
-                continue
-            check(cancel)
+        for batch in in_batches(images, self.batch_size, count, progress, cancel, self.name):
             x = to_network_input(batch, self.size, self.size, self.device, self.name)
             with compute(self.device, self.dtype):
-                out = F.normalize(net(x).float(), dim=-1)
-            rows.append(out.cpu().numpy())
-            done += len(batch)
-            batch = []
-            report(progress, done, max(count, done), self.name)
+                rows.append(F.normalize(net(x).float(), dim=-1).cpu().numpy())
         if not rows:
             return np.zeros((0, self.output_dim()), np.float32)
         return np.concatenate(rows).astype(np.float32)
