@@ -220,7 +220,8 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
     p.add_argument("--topic", help="image topic of a ROS bag (needed when it has several)")
     g = p.add_argument_group("descriptor options")
-    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth)")
+    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth; megaloc: model.safetensors "
+                   "or megaloc.torch; boq: dinov2_12288.pth)")
     g.add_argument("--allow-download", action="store_true", help="let torch hub download missing weights")
     g.add_argument("--vocabulary", help="VLAD vocabulary: 'map' (build from the recording), a c_centers.pt file or a domain name")
     g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg); default: read from --weights")
