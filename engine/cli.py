@@ -59,7 +59,8 @@ class _Bar:
 
 def _descriptor_options(args: argparse.Namespace) -> dict:
     """Descriptor-specific options given on the command line (only those set)."""
-    names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim")
+    names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim",
+             "precision")
     opts = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
     if getattr(args, "allow_download", False):
         opts["allow_download"] = True
@@ -283,13 +284,16 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
     p.add_argument("--topic", help="image topic of a ROS bag (needed when it has several)")
     g = p.add_argument_group("descriptor options")
-    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth)")
+    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth; megaloc: model.safetensors "
+                   "or megaloc.torch; boq: dinov2_12288.pth)")
     g.add_argument("--allow-download", action="store_true", help="let torch hub download missing weights")
     g.add_argument("--vocabulary", help="VLAD vocabulary: 'map' (build from the recording), a c_centers.pt file or a domain name")
-    g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg)")
+    g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg); default: read from --weights")
     g.add_argument("--layer", type=int, help="AnyLoc feature layer")
     g.add_argument("--facet", choices=("value", "key", "query", "token"), help="AnyLoc facet")
     g.add_argument("--device", help="auto, cpu, cuda or mps")
+    g.add_argument("--precision", choices=("auto", "float32", "bfloat16", "float16"),
+                   help="network arithmetic: auto = bfloat16 + TF32 on CUDA, float32 elsewhere (docs/gpu.md)")
     g.add_argument("--batch-size", type=int)
     g.add_argument("--input-height", type=int, help="descriptor input height in pixels (width = 2 x height)")
     g.add_argument("--pca-dim", type=int, help="project descriptors to this dimension (AnyLoc)")

@@ -18,17 +18,18 @@ Files without them still load (``features`` is then None).
 
 from __future__ import annotations
 
+import itertools
 import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, Iterator, Optional
 
 import numpy as np
 
 from ..errors import InputError
 from ..features import FeatureTable
-from ..progress import CancelToken, Progress
+from ..progress import CancelToken, Progress, check, report
 
 
 @dataclass
@@ -111,6 +112,25 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
         check_contents(d, path)
         return d
+
+
+def in_batches(images: Iterable[np.ndarray], batch_size: int, count: int, progress: Optional[Progress],
+               cancel: Optional[CancelToken], stage: str) -> Iterator[list[np.ndarray]]:
+    """``images`` in lists of ``batch_size`` (the last may be shorter): cancel checked before
+    each list, progress ``stage`` reported once the caller has used it."""
+    done = 0
+    batch: list[np.ndarray] = []
+    report(progress, 0, count, stage)
+    for rgb in itertools.chain(images, [None]):
+        if rgb is not None:
+            batch.append(rgb)
+        if not batch or (rgb is not None and len(batch) < batch_size):
+            continue
+        check(cancel)
+        yield batch
+        done += len(batch)
+        batch = []
+        report(progress, done, max(count, done), stage)
 
 
 class DescriptorModel(ABC):
