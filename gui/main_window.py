@@ -30,6 +30,7 @@ from .frame_viewer import FrameViewer
 from .graph_view import GraphView
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
+from .pair_evidence import pair_yaw
 from .node_panel import NodePanel
 from .pair_view import PairView
 from .params_panel import ParamsPanel
@@ -714,7 +715,8 @@ class MainWindow(QMainWindow):
 
     def add_manual_loop(self, key: LoopKey) -> bool:
         try:
-            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key)))
+            yaw = pair_yaw(self.doc, self.frames, tuple(key))  # a manual loop keeps its yaw (issue 14, 8)
+            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key), yaw))
         except InputError as exc:
             self.warn(str(exc))
             return False
