@@ -2,10 +2,13 @@
 
 ``pair_yaw``: the relative heading of a pair, for a loop the user adds by hand
 (issue 14, defect 8: manual loops kept no yaw) and for a pair the pair view shows.
+``PairMatches`` / ``match_segments``: the matched local features of a pair and where
+the pair view draws them; ``evidence_lines``: the numbers behind a decision as text.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -36,3 +39,71 @@ def estimate_yaw(rgb_a: np.ndarray, rgb_b: np.ndarray) -> Optional[float]:
     from engine.shift import relative_yaw
 
     return float(relative_yaw(rgb_a, rgb_b)[0])
+
+
+@dataclass(frozen=True)
+class PairMatches:
+    """Matched local features of a pair, as the geometry module gives them.
+
+    ``uv_a``, ``uv_b``: (m, 2) positions as fractions of the width and height of the
+    panorama-SHIFTED frames; ``inlier_mask``: (m,) bool, True where the match fits the
+    two-view model. ``yaw`` (degrees) is the model's relative heading when it has one.
+    """
+
+    uv_a: np.ndarray
+    uv_b: np.ndarray
+    inlier_mask: np.ndarray
+    yaw: Optional[float] = None
+    inlier_ratio: Optional[float] = None
+
+    @property
+    def inliers(self) -> int:
+        return int(np.count_nonzero(self.inlier_mask))
+
+    @property
+    def matches(self) -> int:
+        return int(len(self.inlier_mask))
+
+
+def match_segments(m: PairMatches, width: int, height: int, shift_a: int, shift_b: int,
+                   roll_b: int, offset_b: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where to draw each match in the pair view: (inlier, outlier) arrays of (k, 2, 2) segments.
+
+    The query is drawn as its original frame at y in [0, height); the candidate as its
+    original frame rolled left by ``roll_b`` columns (aligned by the yaw) at y in
+    [offset_b, offset_b + height). A feature at u in the shifted frame lies at column
+    ``u * width + shift`` of the original (modulo the width), and the candidate's
+    column moves left by ``roll_b`` more.
+    """
+    uv_a = np.asarray(m.uv_a, dtype=np.float64).reshape(-1, 2)
+    uv_b = np.asarray(m.uv_b, dtype=np.float64).reshape(-1, 2)
+    xa = np.mod(uv_a[:, 0] * width + shift_a, width)
+    xb = np.mod(uv_b[:, 0] * width + shift_b - roll_b, width)
+    ya = uv_a[:, 1] * height
+    yb = uv_b[:, 1] * height + offset_b
+    seg = np.stack([np.stack([xa, ya], axis=1), np.stack([xb, yb], axis=1)], axis=1)
+    mask = np.asarray(m.inlier_mask, dtype=bool).reshape(-1)
+    return seg[mask], seg[~mask]
+
+
+def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], similarity: float) -> list[str]:
+    """The numbers behind a loop decision, one short phrase each (for the pair view's text)."""
+    attrs = attrs or {}
+    out = []
+    if np.isfinite(similarity):
+        out.append(f"similarity {similarity:.3f}")
+    score = attrs.get("score")
+    if score is not None and np.isfinite(score):
+        out.append(f"descriptor score {float(score):.2f}")
+    inl, ratio = attrs.get("inliers"), attrs.get("inlier_ratio")
+    if matches is not None:
+        inl, ratio = matches.inliers, matches.inlier_ratio
+        out.append(f"inliers {inl}/{matches.matches} matches"
+                   + (f" ({100 * ratio:.0f} %)" if ratio is not None and np.isfinite(ratio) else ""))
+    elif inl is not None:
+        out.append(f"inliers {int(inl)}" + (f" ({100 * float(ratio):.0f} %)" if ratio is not None
+                                             and np.isfinite(ratio) else ""))
+    support = attrs.get("support", attrs.get("window_count"))
+    if support is not None and int(support) > 0:
+        out.append(f"sequence support {int(support)}")
+    return out

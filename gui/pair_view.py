@@ -1,22 +1,33 @@
-"""Pair view: the two panoramas of a loop candidate, one above the other.
+"""Pair view: the evidence behind a loop, large enough to judge.
 
-The candidate (lower) is rolled by the pair's relative yaw so that the same
-directions line up with the query (upper); the yaw comes from the loop arc when
-it has one, else from ``engine.shift.relative_yaw``. Decision buttons sit below.
+Both panoramas sit in one zoomable view (wheel zooms, drag pans, double-click
+resets): the query on top, the candidate below, rolled by the pair's relative yaw
+so that the same directions line up. The yaw comes from the loop arc when it has
+one, else from the two-view geometry, else from ``engine.shift.relative_yaw``. The
+matched local features are drawn between them as RTAB-Map does: inliers of the
+two-view model in green, outliers in red. The numbers behind the decision
+(similarity, descriptor score, inliers/matches, sequence support) are written
+above. A pair without geometry still shows aligned. Decision buttons sit below.
 """
 
 from __future__ import annotations
 
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Signal
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtCore import QEvent, Qt, Signal
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .frame_cache import FrameCache
-from .style import STATUS_COLORS, panorama_view
+from .pair_evidence import PairMatches, evidence_lines, match_segments
+from .style import INLIER_COLOR, OUTLIER_COLOR, STATUS_COLORS, panorama_view
+
+# Gap between the two panoramas, as a fraction of their height: room for the match lines to be seen.
+GAP_FRACTION = 0.12
+
+MatchesFor = Callable[[LoopKey], Optional[PairMatches]]
 
 
 class PairView(QWidget):
@@ -31,24 +42,45 @@ class PairView(QWidget):
         self.key: Optional[LoopKey] = None
         self.yaw: Optional[float] = None
         self.yaw_score: Optional[float] = None
+        self.matches: Optional[PairMatches] = None
+        # Where the matched features of a pair come from (None: no geometry available).
+        self.matches_for: Optional[MatchesFor] = None
+        self._image_size = (0, 0)
 
         self.title = QLabel("Select a loop candidate in the table, the graph or the matrix")
         self.title.setWordWrap(True)
+        self.evidence = QLabel("")
+        self.evidence.setWordWrap(True)
+        self.evidence.setToolTip("The numbers behind the decision: descriptor similarity and score, "
+                                 "inliers of the two-view geometry among the matched features, and how "
+                                 "many neighbouring pairs support the loop")
+        self.caption = QLabel("")
+        self.caption.setWordWrap(True)
+        for label in (self.title, self.evidence, self.caption):
+            label.setTextFormat(Qt.RichText)
         self.canvas = pg.GraphicsLayoutWidget()
         self.canvas.setBackground("w")
-        self.canvas.ci.setContentsMargins(2, 2, 2, 2)
-        self.query_title = self.canvas.addLabel("Query", row=0, col=0, color="#222", size="9pt")
-        self.query_view = panorama_view()
-        self.canvas.addItem(self.query_view, row=1, col=0)
-        self.cand_title = self.canvas.addLabel("Candidate", row=2, col=0, color="#222", size="9pt")
-        self.cand_view = panorama_view()
-        self.canvas.addItem(self.cand_view, row=3, col=0)
+        self.canvas.ci.setContentsMargins(0, 0, 0, 0)
+        self.view = panorama_view()
+        self.canvas.addItem(self.view, row=0, col=0)
         self.query_image = pg.ImageItem()
         self.cand_image = pg.ImageItem()
-        self.query_view.addItem(self.query_image)
-        self.cand_view.addItem(self.cand_image)
-        self.cand_view.setXLink(self.query_view)  # zoom and pan together
+        self.view.addItem(self.query_image)
+        self.view.addItem(self.cand_image)
+        self.outlier_item = pg.PlotDataItem(pen=pg.mkPen(OUTLIER_COLOR, width=1), connect="pairs")
+        self.outlier_item.setOpacity(0.7)
+        self.inlier_item = pg.PlotDataItem(pen=pg.mkPen(INLIER_COLOR, width=1.5), connect="pairs")
+        self.points_item = pg.ScatterPlotItem(size=5, pen=pg.mkPen("k", width=0.5))
+        for item in (self.outlier_item, self.inlier_item, self.points_item):
+            self.view.addItem(item)
+        self.canvas.setToolTip("Query on top, candidate below (aligned by the yaw); green: inlier matches, "
+                               "red: outliers. Wheel: zoom, drag: pan, double-click: whole pair")
+        self.canvas.viewport().installEventFilter(self)   # double-click: the whole pair again
 
+        self.show_matches = QCheckBox("Matches")
+        self.show_matches.setChecked(True)
+        self.show_matches.setToolTip("Draw the matched local features between the two panoramas")
+        self.show_matches.toggled.connect(self._draw_matches)
         self.confirm_button = QPushButton("✓ Confirm")
         self.confirm_button.setToolTip("This is the same place: keep the loop (C or Y)")
         self.reject_button = QPushButton("✗ Reject")
@@ -71,18 +103,23 @@ class PairView(QWidget):
             b.setStyleSheet("padding: 3px 6px")
             buttons.addWidget(b)
         buttons.addStretch(1)
+        buttons.addWidget(self.show_matches)
 
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
+        layout.setSpacing(2)
         layout.addWidget(self.title)
+        layout.addWidget(self.evidence)
         layout.addWidget(self.canvas, 1)
+        layout.addWidget(self.caption)
         layout.addLayout(buttons)
         self._update_buttons()
 
-        doc.loopsChanged.connect(self._loops_changed)
+        doc.loopsChanged.connect(self.refresh)
         doc.labelsChanged.connect(self.refresh)
-        doc.mapReplaced.connect(self._map_replaced)
+        doc.mapReplaced.connect(self.refresh)
 
+    # -- public ------------------------------------------------------------------------
     def show_pair(self, key: Optional[LoopKey]) -> None:
         """Show the two nodes at source frames ``key`` (a loop or any pair), or clear."""
         self.key = tuple(key) if key is not None else None
@@ -91,20 +128,20 @@ class PairView(QWidget):
     def refresh(self) -> None:
         key = self.key
         if key is None or not self.doc.has_map or self.doc.nodes_of(key) is None:
-            self.key = None
-            self.query_image.clear()
-            self.cand_image.clear()
-            self.title.setText("Select a loop candidate in the table, the graph or the matrix")
-            self._update_buttons()
+            self._clear()
             return
         u, v = self.doc.nodes_of(key)
         du, dv = self.doc.node_data(u), self.doc.node_data(v)
         attrs = self.doc.loop_attrs(key)
         a, b = self.cache.get(key[0]), self.cache.get(key[1])
+        self.matches = self.matches_for(key) if self.matches_for is not None else None
         self.yaw, self.yaw_score = None, None
         yaw_source = ""
         if attrs is not None and attrs.get("yaw") is not None and np.isfinite(attrs["yaw"]):
             self.yaw, yaw_source = float(attrs["yaw"]), "from the loop"
+        elif self.matches is not None and self.matches.yaw is not None:
+            self.yaw, yaw_source = float(self.matches.yaw), "from the matched features"
+            self.doc.note_estimated_yaw(key, self.yaw)
         elif a is not None and b is not None and a.rgb.shape == b.rgb.shape:
             from engine.shift import relative_yaw
 
@@ -119,28 +156,80 @@ class PairView(QWidget):
                  if status else "<i>not a loop</i>")
         yaw_text = f"yaw {self.yaw:+.1f}° ({yaw_source})" if self.yaw is not None else "yaw unknown"
         self.title.setText(f"<b>{u}</b> (frame {key[0]}) ↔ <b>{v}</b> (frame {key[1]}) &nbsp;·&nbsp; "
-                           f"similarity {sim:.3f} &nbsp;·&nbsp; {yaw_text} &nbsp;·&nbsp; {state}")
-        self.query_title.setText(_caption("Query", u, du))
-        aligned = " (aligned)" if self.yaw is not None else ""
-        self.cand_title.setText(_caption("Candidate", v, dv) + aligned)
+                           f"{state} &nbsp;·&nbsp; {yaw_text}")
+        lines = evidence_lines(attrs, self.matches, sim)
+        if self.matches is None and a is not None:
+            lines.append("no feature matches for this pair")
+        self.evidence.setText(" &nbsp;·&nbsp; ".join(lines))
+        aligned = " (rolled to align)" if self.yaw is not None else ""
+        self.caption.setText(f"▲ {_caption('Query', u, du)} &nbsp; ▼ {_caption('Candidate', v, dv)}{aligned}")
+        self._update_buttons()
+
+    def reset_zoom(self) -> None:
+        """Show the whole pair (both panoramas and the gap between them)."""
+        w, h = self._image_size
+        if w and h:
+            self.view.setRange(xRange=(0, w), yRange=(0, h * (2 + GAP_FRACTION)), padding=0.01)
+
+    def match_segments_shown(self) -> tuple[np.ndarray, np.ndarray]:
+        """(inlier, outlier) segments drawn now, in view coordinates (for tests)."""
+        return self._segments
+
+    # -- internals ------------------------------------------------------------------------
+    def _clear(self) -> None:
+        self.key = None
+        self.matches = None
+        self.query_image.clear()
+        self.cand_image.clear()
+        self._image_size = (0, 0)
+        self._segments = (np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
+        self._draw_matches()
+        self.title.setText("Select a loop candidate in the table, the graph or the matrix")
+        self.evidence.setText("")
+        self.caption.setText("")
         self._update_buttons()
 
     def _show_images(self, a, b) -> None:
+        self._segments = (np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
         if a is None or b is None:
             self.query_image.clear()
             self.cand_image.clear()
-            self.query_title.setText("Frames not available (recording not found)")
+            self._image_size = (0, 0)
+            self._draw_matches()
+            self.caption.setText("Frames not available (recording not found)")
             return
         from engine.shift import apply_shift, yaw_to_columns
 
-        cand = b.rgb
-        if self.yaw is not None:
-            cand = apply_shift(b.rgb, yaw_to_columns(self.yaw, b.rgb.shape[1]))
+        h, w = a.rgb.shape[:2]
+        roll = yaw_to_columns(self.yaw, b.rgb.shape[1]) if self.yaw is not None else 0
+        cand = apply_shift(b.rgb, roll) if roll else b.rgb
+        offset = h * (1 + GAP_FRACTION)
         self.query_image.setImage(a.rgb, autoLevels=False, levels=(0, 255))
         self.cand_image.setImage(cand, autoLevels=False, levels=(0, 255))
-        h, w = a.rgb.shape[:2]
-        for view in (self.query_view, self.cand_view):
-            view.setRange(xRange=(0, w), yRange=(0, h), padding=0.01)
+        self.cand_image.setPos(0, offset)
+        if self.matches is not None and b.rgb.shape == a.rgb.shape:
+            self._segments = match_segments(self.matches, w, h, a.shift, b.shift, roll, offset)
+        self._draw_matches()
+        if self._image_size != (w, h):
+            self._image_size = (w, h)
+            self.reset_zoom()
+
+    def _draw_matches(self) -> None:
+        inl, out = getattr(self, "_segments", (np.zeros((0, 2, 2)),) * 2)
+        on = self.show_matches.isChecked()
+        for item, seg in ((self.inlier_item, inl), (self.outlier_item, out)):
+            pts = seg.reshape(-1, 2) if on else np.zeros((0, 2))
+            item.setData(pts[:, 0], pts[:, 1], connect="pairs")
+        pts = np.concatenate([inl.reshape(-1, 2), out.reshape(-1, 2)]) if on else np.zeros((0, 2))
+        colours = [INLIER_COLOR] * (2 * len(inl)) + [OUTLIER_COLOR] * (2 * len(out)) if on else []
+        self.points_item.setData(x=pts[:, 0], y=pts[:, 1], brush=[pg.mkBrush(c) for c in colours])
+
+    def eventFilter(self, watched, event) -> bool:
+        if (watched is self.canvas.viewport() and event.type() == QEvent.MouseButtonDblClick
+                and event.button() == Qt.LeftButton):
+            self.reset_zoom()
+            return True
+        return super().eventFilter(watched, event)
 
     def _update_buttons(self) -> None:
         attrs = self.doc.loop_attrs(self.key) if self.key is not None and self.doc.has_map else None
@@ -150,12 +239,6 @@ class PairView(QWidget):
             b.setEnabled(is_loop and not manual)
         self.add_button.setEnabled(self.key is not None and not is_loop and self.key[0] != self.key[1])
         self.remove_button.setEnabled(manual)
-
-    def _loops_changed(self) -> None:
-        self.refresh()
-
-    def _map_replaced(self) -> None:
-        self.refresh()
 
 
 def _caption(role: str, node: str, data: dict) -> str:

@@ -30,6 +30,9 @@ NODE_COLOR = "#34495e"
 CURRENT_COLOR = "#e84393"
 SELECTED_COLOR = "#8e44ad"
 CANONICAL_COLOR = "#e84393"
+# Matched features in the pair view, as RTAB-Map draws them: inliers green, outliers red.
+INLIER_COLOR = "#00e640"
+OUTLIER_COLOR = "#ff3030"
 
 
 def status_pen(status: str, width: float = 2.0, selected: bool = False):

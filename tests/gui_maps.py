@@ -59,3 +59,26 @@ def colour_pixels(widget, colour: str, tol: int = 40, centre=None, radius: int =
         yy, xx = np.mgrid[0:h, 0:w]
         near &= np.hypot(xx - centre[0] * ratio, yy - centre[1] * ratio) <= radius * ratio
     return int(near.sum())
+
+
+def pano_folder(path, n: int = 20, revisit=(0, 15), roll: int = 64, width: int = 256):
+    """A folder of ``n`` real panoramas (crops of the example panorama's columns at other
+    headings); frame ``revisit[1]`` is frame ``revisit[0]`` turned by ``roll`` columns."""
+    from pathlib import Path
+
+    from PIL import Image
+
+    base = Image.open(Path(__file__).parent / "data" / "examplepano_1024.jpg").convert("RGB")
+    base = np.asarray(base.resize((width, width // 2)))
+    out = Path(path)
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(1)
+    frames = []
+    for k in range(n):
+        img = np.roll(base, int(rng.integers(0, width)), axis=1)
+        img = np.flipud(img) if k % 2 else img  # other places look different
+        frames.append(img)
+    frames[revisit[1]] = np.roll(frames[revisit[0]], roll, axis=1)
+    for k, img in enumerate(frames):
+        Image.fromarray(np.ascontiguousarray(img)).save(out / f"frame_{k:04d}.png")
+    return out, frames
