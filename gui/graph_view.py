@@ -15,7 +15,7 @@ from typing import Optional
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .layout import path_layout
@@ -81,7 +81,10 @@ class GraphView(QWidget):
         self.plot.setToolTip("Click a node to see its frame, click a loop to select it, "
                              "Ctrl+click a node to add a manual loop to the current node")
 
-        strip = QHBoxLayout()
+        # The toggles never set the view's minimum width (they clip on a very narrow view).
+        self.toggle_strip = QWidget()
+        self.toggle_strip.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Fixed)
+        strip = QHBoxLayout(self.toggle_strip)
         strip.setContentsMargins(4, 2, 4, 0)
         strip.setSpacing(8)
         for box in self.toggles.values():
@@ -90,7 +93,7 @@ class GraphView(QWidget):
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.setSpacing(0)
-        layout.addLayout(strip)
+        layout.addWidget(self.toggle_strip)
         layout.addWidget(self.plot)
 
         doc.mapReplaced.connect(self.rebuild)

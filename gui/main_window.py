@@ -31,6 +31,7 @@ from .graph_view import GraphView
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
 from .pair_evidence import pair_yaw
+from .window_layout import split_for_narrow_window
 from .node_panel import NodePanel
 from .pair_view import PairView
 from .params_panel import ParamsPanel
@@ -1041,6 +1042,8 @@ class MainWindow(QMainWindow):
 
     def _initial_split(self) -> None:
         total = self.main_splitter.width()
+        if 400 < total < 1100:  # gui-b: a 1280-px screen (issue 14, defect 4): see split_for_narrow_window
+            return split_for_narrow_window(self)
         if total > 400:
             left = int(0.31 * total)
             self.main_splitter.setSizes([left, total - left])

@@ -66,21 +66,21 @@ class PairMatches:
 
 
 def match_segments(m: PairMatches, width: int, height: int, shift_a: int, shift_b: int,
-                   roll_b: int, offset_b: float) -> tuple[np.ndarray, np.ndarray]:
+                   roll_b: int, offset_b: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Where to draw each match in the pair view: (inlier, outlier) arrays of (k, 2, 2) segments.
 
-    The query is drawn as its original frame at y in [0, height); the candidate as its
-    original frame rolled left by ``roll_b`` columns (aligned by the yaw) at y in
-    [offset_b, offset_b + height). A feature at u in the shifted frame lies at column
+    The query is drawn as its original frame with its top-left corner at (0, 0); the
+    candidate as its original frame rolled left by ``roll_b`` columns (aligned by the
+    yaw) with its top-left corner at ``offset_b`` (below or beside the query). A feature at u in the shifted frame lies at column
     ``u * width + shift`` of the original (modulo the width), and the candidate's
     column moves left by ``roll_b`` more.
     """
     uv_a = np.asarray(m.uv_a, dtype=np.float64).reshape(-1, 2)
     uv_b = np.asarray(m.uv_b, dtype=np.float64).reshape(-1, 2)
     xa = np.mod(uv_a[:, 0] * width + shift_a, width)
-    xb = np.mod(uv_b[:, 0] * width + shift_b - roll_b, width)
+    xb = np.mod(uv_b[:, 0] * width + shift_b - roll_b, width) + offset_b[0]
     ya = uv_a[:, 1] * height
-    yb = uv_b[:, 1] * height + offset_b
+    yb = uv_b[:, 1] * height + offset_b[1]
     seg = np.stack([np.stack([xa, ya], axis=1), np.stack([xb, yb], axis=1)], axis=1)
     mask = np.asarray(m.inlier_mask, dtype=bool).reshape(-1)
     return seg[mask], seg[~mask]

@@ -1,7 +1,8 @@
 """Pair view: the evidence behind a loop, large enough to judge.
 
 Both panoramas sit in one zoomable view (wheel zooms, drag pans, double-click
-resets): the query on top, the candidate below, rolled by the pair's relative yaw
+resets): the query on top and the candidate below, or side by side when the view is
+wide and short (whichever shows them larger), the candidate rolled by the pair's relative yaw
 so that the same directions line up. The yaw comes from the loop arc when it has
 one, else from the two-view geometry, else from ``engine.shift.relative_yaw``. The
 matched local features are drawn between them as RTAB-Map does: inliers of the
@@ -17,14 +18,15 @@ from typing import Callable, Optional
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QEvent, Qt, Signal
-from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QPushButton, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .frame_cache import FrameCache
 from .pair_evidence import PairMatches, evidence_lines, match_segments
 from .style import INLIER_COLOR, OUTLIER_COLOR, STATUS_COLORS, panorama_view
 
-# Gap between the two panoramas, as a fraction of their height: room for the match lines to be seen.
+# Gap between the two panoramas, as a fraction of their height (stacked) or width (side by
+# side): room for the match lines to be seen between them.
 GAP_FRACTION = 0.12
 
 MatchesFor = Callable[[LoopKey], Optional[PairMatches]]
@@ -46,6 +48,9 @@ class PairView(QWidget):
         # Where the matched features of a pair come from (None: no geometry available).
         self.matches_for: Optional[MatchesFor] = None
         self._image_size = (0, 0)
+        self.side_by_side = False
+        self.cand_offset = (0.0, 0.0)   # top-left corner of the candidate in view coordinates
+        self._segments = (np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
 
         self.title = QLabel("Select a loop candidate in the table, the graph or the matrix")
         self.title.setWordWrap(True)
@@ -73,7 +78,8 @@ class PairView(QWidget):
         self.points_item = pg.ScatterPlotItem(size=5, pen=pg.mkPen("k", width=0.5))
         for item in (self.outlier_item, self.inlier_item, self.points_item):
             self.view.addItem(item)
-        self.canvas.setToolTip("Query on top, candidate below (aligned by the yaw); green: inlier matches, "
+        self.canvas.setToolTip("Query on top (or left), candidate below (or right), aligned by the yaw; "
+                               "green: inlier matches, "
                                "red: outliers. Wheel: zoom, drag: pan, double-click: whole pair")
         self.canvas.viewport().installEventFilter(self)   # double-click: the whole pair again
 
@@ -100,16 +106,23 @@ class PairView(QWidget):
         buttons.setContentsMargins(0, 0, 0, 0)
         for b in (self.confirm_button, self.reject_button, self.reset_button, self.add_button, self.remove_button):
             b.setMinimumWidth(0)
-            b.setStyleSheet("padding: 3px 6px")
+            b.setStyleSheet("padding: 3px 4px")
             buttons.addWidget(b)
         buttons.addStretch(1)
-        buttons.addWidget(self.show_matches)
+        # The texts above wrap; they never set the view's minimum width (1280-px screens, defect 4).
+        for label in (self.title, self.evidence, self.caption):
+            label.setMinimumWidth(0)
+            label.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
 
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
         layout.setSpacing(2)
+        top = QHBoxLayout()
+        top.setContentsMargins(0, 0, 0, 0)
+        top.addWidget(self.evidence, 1)
+        top.addWidget(self.show_matches, 0, Qt.AlignTop)
         layout.addWidget(self.title)
-        layout.addWidget(self.evidence)
+        layout.addLayout(top)
         layout.addWidget(self.canvas, 1)
         layout.addWidget(self.caption)
         layout.addLayout(buttons)
@@ -148,7 +161,7 @@ class PairView(QWidget):
             self.yaw, self.yaw_score = relative_yaw(a.rgb, b.rgb)
             yaw_source = f"estimated, score {self.yaw_score:.2f}"
             self.doc.note_estimated_yaw(key, self.yaw)
-        self._show_images(a, b)
+        shown = self._show_images(a, b)
 
         sim = self.doc.pair_similarity(int(du["index"]), int(dv["index"]))
         status = attrs.get("status", "auto") if attrs else None
@@ -158,18 +171,20 @@ class PairView(QWidget):
         self.title.setText(f"<b>{u}</b> (frame {key[0]}) ↔ <b>{v}</b> (frame {key[1]}) &nbsp;·&nbsp; "
                            f"{state} &nbsp;·&nbsp; {yaw_text}")
         lines = evidence_lines(attrs, self.matches, sim)
-        if self.matches is None and a is not None:
+        if self.matches is None and shown:
             lines.append("no feature matches for this pair")
         self.evidence.setText(" &nbsp;·&nbsp; ".join(lines))
         aligned = " (rolled to align)" if self.yaw is not None else ""
-        self.caption.setText(f"▲ {_caption('Query', u, du)} &nbsp; ▼ {_caption('Candidate', v, dv)}{aligned}")
+        self.caption.setText(f"{_caption('Query', u, du)} &nbsp;·&nbsp; {_caption('Candidate', v, dv)}{aligned}"
+                             if shown else "Frames not available (recording not found, or frames of different sizes)")
         self._update_buttons()
 
     def reset_zoom(self) -> None:
         """Show the whole pair (both panoramas and the gap between them)."""
         w, h = self._image_size
         if w and h:
-            self.view.setRange(xRange=(0, w), yRange=(0, h * (2 + GAP_FRACTION)), padding=0.01)
+            dx, dy = self.cand_offset
+            self.view.setRange(xRange=(0, dx + w), yRange=(0, dy + h), padding=0.01)
 
     def match_segments_shown(self) -> tuple[np.ndarray, np.ndarray]:
         """(inlier, outlier) segments drawn now, in view coordinates (for tests)."""
@@ -189,33 +204,46 @@ class PairView(QWidget):
         self.caption.setText("")
         self._update_buttons()
 
-    def _show_images(self, a, b) -> None:
+    def _show_images(self, a, b) -> bool:
         self._segments = (np.zeros((0, 2, 2)), np.zeros((0, 2, 2)))
-        if a is None or b is None:
+        if a is None or b is None or a.rgb.shape != b.rgb.shape:
             self.query_image.clear()
             self.cand_image.clear()
             self._image_size = (0, 0)
             self._draw_matches()
-            self.caption.setText("Frames not available (recording not found)")
-            return
+            return False
         from engine.shift import apply_shift, yaw_to_columns
 
         h, w = a.rgb.shape[:2]
         roll = yaw_to_columns(self.yaw, b.rgb.shape[1]) if self.yaw is not None else 0
         cand = apply_shift(b.rgb, roll) if roll else b.rgb
-        offset = h * (1 + GAP_FRACTION)
         self.query_image.setImage(a.rgb, autoLevels=False, levels=(0, 255))
         self.cand_image.setImage(cand, autoLevels=False, levels=(0, 255))
-        self.cand_image.setPos(0, offset)
-        if self.matches is not None and b.rgb.shape == a.rgb.shape:
-            self._segments = match_segments(self.matches, w, h, a.shift, b.shift, roll, offset)
+        self._arrange(w, h, a.shift, b.shift, roll)
+        return True
+
+    def _arrange(self, w: int, h: int, shift_a: int = 0, shift_b: int = 0, roll: int = 0) -> None:
+        """Candidate below or beside the query, whichever shows the panoramas larger here."""
+        self._shown = (w, h, shift_a, shift_b, roll)
+        cw, ch = max(self.canvas.width(), 1), max(self.canvas.height(), 1)
+        stacked = min(cw / w, ch / (h * (2 + GAP_FRACTION)))
+        beside = min(cw / (w * (2 + GAP_FRACTION)), ch / h)
+        self.side_by_side = beside > stacked
+        self.cand_offset = (w * (1 + GAP_FRACTION), 0.0) if self.side_by_side else (0.0, h * (1 + GAP_FRACTION))
+        self.cand_image.setPos(*self.cand_offset)
+        if self.matches is not None:
+            self._segments = match_segments(self.matches, w, h, shift_a, shift_b, roll, self.cand_offset)
         self._draw_matches()
-        if self._image_size != (w, h):
-            self._image_size = (w, h)
-            self.reset_zoom()
+        self._image_size = (w, h)
+        self.reset_zoom()
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        if self._image_size[0]:
+            self._arrange(*self._shown)
 
     def _draw_matches(self) -> None:
-        inl, out = getattr(self, "_segments", (np.zeros((0, 2, 2)),) * 2)
+        inl, out = self._segments
         on = self.show_matches.isChecked()
         for item, seg in ((self.inlier_item, inl), (self.outlier_item, out)):
             pts = seg.reshape(-1, 2) if on else np.zeros((0, 2))

@@ -66,9 +66,12 @@ def test_matches_are_drawn_between_the_same_points_in_two_colours(pair):
     view.show_pair((0, 15))
     inliers, outliers = view.match_segments_shown()
     assert len(inliers) == 12 and len(outliers) == 5
-    # Aligned: each inlier joins a point on the query to the same column on the candidate below.
-    assert np.abs(inliers[:, 0, 0] - inliers[:, 1, 0]).max() < 2.5
-    assert (inliers[:, 1, 1] > inliers[:, 0, 1]).all(), "the candidate is drawn below the query"
+    # Aligned: each inlier joins a point on the query to the same point of the candidate (drawn
+    # below or beside it: less its offset).
+    dx, dy = view.cand_offset
+    assert dx > 0 or dy > 0
+    assert np.abs(inliers[:, 0, 0] - (inliers[:, 1, 0] - dx)).max() < 2.5
+    assert np.abs(inliers[:, 0, 1] - (inliers[:, 1, 1] - dy)).max() < 1e-6
     assert "12/17" in view.evidence.text()
     pen_in, pen_out = view.inlier_item.opts["pen"].color(), view.outlier_item.opts["pen"].color()
     assert pen_in != pen_out
@@ -87,6 +90,15 @@ def test_loop_evidence_numbers_are_shown(pair):
     view.show_pair((3, 10))
     text = view.evidence.text()
     assert "4.20" in text and "37" in text and "61 %" in text and "support 5" in text
+
+
+def test_a_wide_short_view_puts_the_pair_side_by_side(pair, qtbot):
+    view, _, _ = pair
+    view.show_pair((0, 15))
+    assert not view.side_by_side
+    view.resize(1000, 260)
+    qtbot.wait(20)
+    assert view.side_by_side and view.cand_offset[0] > 0
 
 
 def test_wheel_zooms_and_double_click_shows_the_whole_pair(pair, qtbot):
