@@ -29,6 +29,16 @@ app = QApplication(["panotopo"])
 from gui.main_window import MainWindow
 w = MainWindow(settings=QSettings(sys.argv[1], QSettings.IniFormat), interactive=False)
 w.show(); app.processEvents()
+# A map on screen, with the long texts a session has: a place name, a node header, a pair.
+from tests.gui_maps import make_doc
+doc = make_doc(None, [(0, 19, "auto")], n=1500)
+w.doc.replace_map(doc.topomap, doc.descs)
+w.doc.topomap.set_label("n1234", "the long corridor behind the second kitchen")
+w.node_panel.show_node(1234)
+w.pair_view.show_pair((0, 19))
+w.frame_viewer.info.setText("<b>frame 12345</b> / 99999 &nbsp; · &nbsp; t = 1234.56 s &nbsp; · &nbsp; node "
+                            "<b>n1234</b> (since frame 12340) &nbsp; · &nbsp; “the long corridor behind the second kitchen”")
+app.processEvents()
 hint = w.minimumSizeHint()
 print(json.dumps({"w": hint.width(), "h": hint.height(), "dpr": w.devicePixelRatio()}))
 w.close()
