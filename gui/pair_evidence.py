@@ -87,23 +87,37 @@ def match_segments(m: PairMatches, width: int, height: int, shift_a: int, shift_
 
 
 def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], similarity: float) -> list[str]:
-    """The numbers behind a loop decision, one short phrase each (for the pair view's text)."""
+    """The numbers behind a loop decision, one short phrase each (for the pair view's text).
+
+    From the loop arc's evidence attributes (``engine.graph.EVIDENCE_KEYS``: ``score`` and
+    ``support`` in standard deviations above the recording's background, ``matches``,
+    ``inliers``, ``inlier_ratio``, ``direction``, ``confidence``); the feature counts of
+    ``matches`` (computed for the view) take the place of the arc's when given.
+    """
     attrs = attrs or {}
+
+    def num(key):
+        value = attrs.get(key)
+        return float(value) if value is not None and np.isfinite(float(value)) else None
+
     out = []
     if np.isfinite(similarity):
         out.append(f"similarity {similarity:.3f}")
-    score = attrs.get("score")
-    if score is not None and np.isfinite(score):
-        out.append(f"descriptor score {float(score):.2f}")
-    inl, ratio = attrs.get("inliers"), attrs.get("inlier_ratio")
+    if num("score") is not None:
+        out.append(f"descriptor score {num('score'):.2f} σ")
+    inl, total, ratio = num("inliers"), num("matches"), num("inlier_ratio")
     if matches is not None:
-        inl, ratio = matches.inliers, matches.inlier_ratio
-        out.append(f"inliers {inl}/{matches.matches} matches"
-                   + (f" ({100 * ratio:.0f} %)" if ratio is not None and np.isfinite(ratio) else ""))
-    elif inl is not None:
-        out.append(f"inliers {int(inl)}" + (f" ({100 * float(ratio):.0f} %)" if ratio is not None
-                                             and np.isfinite(ratio) else ""))
-    support = attrs.get("support", attrs.get("window_count"))
-    if support is not None and int(support) > 0:
-        out.append(f"sequence support {int(support)}")
+        inl, total, ratio = matches.inliers, matches.matches, matches.inlier_ratio
+    if inl is not None:
+        ratio_text = f" ({100 * ratio:.0f} %)" if ratio is not None and np.isfinite(ratio) else ""
+        out.append(f"inliers {int(inl)}/{int(total)} matches{ratio_text}" if total is not None
+                   else f"inliers {int(inl)}{ratio_text}")
+    if num("support") is not None:
+        out.append(f"sequence support {num('support'):.1f} σ")
+    elif num("window_count"):
+        out.append(f"window count {int(num('window_count'))}")
+    if num("direction"):
+        out.append("same way" if num("direction") > 0 else "reverse way")
+    if num("confidence") is not None:
+        out.append(f"confidence {num('confidence'):.2f}")
     return out

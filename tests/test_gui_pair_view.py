@@ -85,11 +85,11 @@ def test_matches_are_drawn_between_the_same_points_in_two_colours(pair):
 def test_loop_evidence_numbers_are_shown(pair):
     view, _, _ = pair
     g = view.doc.topomap.graph
-    g.edges["n3", "n10"].update(score=4.2, inliers=37, inlier_ratio=0.61, support=5)
+    g.edges["n3", "n10"].update(score=4.2, matches=60, inliers=37, inlier_ratio=0.61, support=5.5)
     view.doc._rows = None
     view.show_pair((3, 10))
     text = view.evidence.text()
-    assert "4.20" in text and "37" in text and "61 %" in text and "support 5" in text
+    assert "4.20" in text and "37/60" in text and "61 %" in text and "support 5.5" in text
 
 
 def test_a_wide_short_view_puts_the_pair_side_by_side(pair, qtbot):
