@@ -716,7 +716,7 @@ class MainWindow(QMainWindow):
 
     def add_manual_loop(self, key: LoopKey) -> bool:
         try:
-            yaw = pair_yaw(self.doc, self.frames, tuple(key))  # a manual loop keeps its yaw (issue 14, 8)
+            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache)  # gui-b: issue 14, 8
             self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key), yaw))
         except InputError as exc:
             self.warn(str(exc))

@@ -14,18 +14,22 @@ from typing import Optional
 import numpy as np
 
 
-def pair_yaw(doc, cache, key) -> Optional[float]:
+def pair_yaw(doc, cache, key, matches_for=None) -> Optional[float]:
     """Yaw (degrees, ``engine.shift`` convention) of the pair at source frames ``key``, or None.
 
     The loop's own yaw when it has one, else one the pair view already estimated,
-    else estimated now from the two frames (``estimate_yaw``); None when the
-    frames cannot be read (recording not found).
+    else the two-view geometry's (``matches_for``, e.g. a ``MatchCache``) when it
+    fitted a model, else estimated from the two frames' column signals
+    (``estimate_yaw``); None when the frames cannot be read (recording not found).
     """
     attrs = doc.loop_attrs(key) if doc.has_map else None
     if attrs is not None and attrs.get("yaw") is not None and np.isfinite(attrs["yaw"]):
         return float(attrs["yaw"])
     if key in doc.estimated_yaws:
         return float(doc.estimated_yaws[key])
+    m = matches_for(key) if matches_for is not None else None
+    if m is not None and m.yaw is not None:
+        return float(m.yaw)
     a, b = cache.get(key[0]), cache.get(key[1])
     if a is None or b is None:
         return None
@@ -121,3 +125,62 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
     if num("confidence") is not None:
         out.append(f"confidence {num('confidence'):.2f}")
     return out
+
+
+class MatchCache:
+    """The matched features of a pair, from the two-view geometry, computed once per pair.
+
+    Features come from the descriptors of the run (``Descriptors.features``: the local
+    features of each panorama-shifted frame) when it kept them, else are extracted now
+    from the two frames (``engine.features.extract``, ~40 ms a frame). ``engine.sphere``
+    matches them and fits the model; without those modules (an older engine) there are
+    no matches and the pair view shows the aligned pair alone. ``clear`` when the map or
+    the recording changes.
+    """
+
+    def __init__(self, doc, cache, capacity: int = 64) -> None:
+        self.doc, self.cache, self.capacity = doc, cache, capacity
+        self._pairs: dict = {}
+
+    def clear(self) -> None:
+        self._pairs = {}
+
+    def __call__(self, key) -> Optional[PairMatches]:
+        key = tuple(int(k) for k in key)
+        if key not in self._pairs:
+            if len(self._pairs) >= self.capacity:
+                self._pairs.pop(next(iter(self._pairs)))
+            self._pairs[key] = self._compute(key)
+        return self._pairs[key]
+
+    def _compute(self, key) -> Optional[PairMatches]:
+        try:
+            from engine import sphere
+        except ImportError:
+            return None
+        fa, fb = self._features(key[0]), self._features(key[1])
+        if fa is None or fb is None:
+            return None
+        tv = sphere.two_view(fa[0], fb[0])
+        yaw = None
+        if tv.yaw_deg is not None:   # the model's yaw is of the shifted frames: back to the originals
+            yaw = float(sphere.yaw_of_originals(tv.yaw_deg, fa[1], fb[1], fa[2]))
+        return PairMatches(uv_a=tv.uv_a, uv_b=tv.uv_b, inlier_mask=tv.inlier_mask, yaw=yaw,
+                           inlier_ratio=float(tv.inlier_ratio))
+
+    def _features(self, frame: int):
+        """(LocalFeatures of the shifted frame, its shift, the frame width), or None."""
+        item = self.cache.get(frame)
+        if item is None:
+            return None
+        width = int(item.rgb.shape[1])
+        descs = self.doc.descs
+        table = getattr(descs, "features", None) if descs is not None else None
+        if table is not None:
+            rows = np.flatnonzero(np.asarray(descs.frames) == frame)
+            if rows.size and int(rows[0]) < len(table):
+                return table.of(int(rows[0])), int(descs.shifts[rows[0]]), width
+        from engine.features import extract
+        from engine.shift import apply_shift
+
+        return extract(apply_shift(item.rgb, item.shift)), int(item.shift), width

@@ -22,7 +22,7 @@ from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QPushButton, QSize
 
 from .document import Document, LoopKey
 from .frame_cache import FrameCache
-from .pair_evidence import PairMatches, evidence_lines, match_segments
+from .pair_evidence import MatchCache, PairMatches, evidence_lines, match_segments
 from .style import INLIER_COLOR, OUTLIER_COLOR, STATUS_COLORS, panorama_view
 
 # Gap between the two panoramas, as a fraction of their height (stacked) or width (side by
@@ -45,8 +45,9 @@ class PairView(QWidget):
         self.yaw: Optional[float] = None
         self.yaw_score: Optional[float] = None
         self.matches: Optional[PairMatches] = None
-        # Where the matched features of a pair come from (None: no geometry available).
-        self.matches_for: Optional[MatchesFor] = None
+        # Where the matched features of a pair come from (None: no geometry).
+        self.match_cache = MatchCache(doc, cache)
+        self.matches_for: Optional[MatchesFor] = self.match_cache
         self._image_size = (0, 0)
         self.side_by_side = False
         self.cand_offset = (0.0, 0.0)   # top-left corner of the candidate in view coordinates
@@ -130,7 +131,8 @@ class PairView(QWidget):
 
         doc.loopsChanged.connect(self.refresh)
         doc.labelsChanged.connect(self.refresh)
-        doc.mapReplaced.connect(self.refresh)
+        doc.mapReplaced.connect(self._map_replaced)
+        doc.sourceChanged.connect(self.match_cache.clear)
 
     # -- public ------------------------------------------------------------------------
     def show_pair(self, key: Optional[LoopKey]) -> None:
@@ -251,6 +253,10 @@ class PairView(QWidget):
         pts = np.concatenate([inl.reshape(-1, 2), out.reshape(-1, 2)]) if on else np.zeros((0, 2))
         colours = [INLIER_COLOR] * (2 * len(inl)) + [OUTLIER_COLOR] * (2 * len(out)) if on else []
         self.points_item.setData(x=pts[:, 0], y=pts[:, 1], brush=[pg.mkBrush(c) for c in colours])
+
+    def _map_replaced(self) -> None:
+        self.match_cache.clear()
+        self.refresh()
 
     def eventFilter(self, watched, event) -> bool:
         if (watched is self.canvas.viewport() and event.type() == QEvent.MouseButtonDblClick

@@ -50,6 +50,7 @@ def _true_matches(cache, k_inliers: int = 12, k_outliers: int = 5, seed: int = 0
 
 def test_candidate_is_aligned_with_the_query_without_geometry(pair):
     view, cache, frames = pair
+    view.matches_for = None   # no two-view geometry for this pair
     view.show_pair((0, 15))
     assert view.yaw is not None and abs(abs(view.yaw) - 90) < 3, "a quarter turn is found"
     query, cand = view.query_image.image, view.cand_image.image
@@ -84,12 +85,27 @@ def test_matches_are_drawn_between_the_same_points_in_two_colours(pair):
 
 def test_loop_evidence_numbers_are_shown(pair):
     view, _, _ = pair
+    view.matches_for = None   # the numbers stored on the loop arc
     g = view.doc.topomap.graph
     g.edges["n3", "n10"].update(score=4.2, matches=60, inliers=37, inlier_ratio=0.61, support=5.5)
     view.doc._rows = None
     view.show_pair((3, 10))
     text = view.evidence.text()
     assert "4.20" in text and "37/60" in text and "61 %" in text and "support 5.5" in text
+
+
+def test_real_matches_of_a_revisit_are_aligned_inliers(pair):
+    pytest.importorskip("engine.sphere")
+    view, _, _ = pair
+    view.show_pair((0, 15))   # the view's own match cache: features extracted, two-view geometry fitted
+    assert view.matches is not None
+    inliers, outliers = view.match_segments_shown()
+    assert len(inliers) >= 20 and len(inliers) > 3 * len(outliers), "a revisit has many inliers"
+    dx, dy = view.cand_offset
+    off = np.abs(inliers[:, 0] - (inliers[:, 1] - np.array([dx, dy])))
+    off[:, 0] = np.minimum(off[:, 0], W - off[:, 0])   # across the seam
+    assert np.median(off) < 2.0, "inliers join the same points of the aligned panoramas"
+    assert f"{len(inliers)}/{len(inliers) + len(outliers)}" in view.evidence.text()
 
 
 def test_a_wide_short_view_puts_the_pair_side_by_side(pair, qtbot):
@@ -110,3 +126,16 @@ def test_wheel_zooms_and_double_click_shows_the_whole_pair(pair, qtbot):
     centre = view.canvas.mapFromScene(view.view.mapViewToScene(QPointF(W / 2, 64)))
     qtbot.mouseDClick(view.canvas.viewport(), Qt.LeftButton, pos=centre)
     assert abs(view.view.viewRect().width() - whole.width()) < 0.05 * whole.width()
+
+
+def test_the_yaw_of_a_pair_comes_from_its_features(pair):
+    pytest.importorskip("engine.sphere")
+    from gui.pair_evidence import pair_yaw
+
+    view, cache, _ = pair
+    expected = 360.0 * ROLL / W     # frame 15 is frame 0 turned by ROLL columns
+    m = view.match_cache((0, 15))
+    assert m is not None and m.yaw is not None
+    assert abs((m.yaw - expected + 180) % 360 - 180) < 3
+    yaw = pair_yaw(view.doc, cache, (0, 15), view.match_cache)
+    assert abs((yaw - expected + 180) % 360 - 180) < 3
