@@ -716,7 +716,7 @@ class MainWindow(QMainWindow):
 
     def add_manual_loop(self, key: LoopKey) -> bool:
         try:
-            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache)  # gui-b: issue 14, 8
+            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache.peek)  # gui-b: issue 14, 8
             self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key), yaw))
         except InputError as exc:
             self.warn(str(exc))
@@ -1078,6 +1078,7 @@ class MainWindow(QMainWindow):
         """Stop the worker thread and timers and release the recording."""
         self.autosave_timer.stop()
         self.frame_viewer.shutdown()
+        self.pair_view.shutdown()
         self.runner.stop()
         self.doc.close()
 

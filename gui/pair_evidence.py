@@ -8,6 +8,7 @@ the pair view draws them; ``evidence_lines``: the numbers behind a decision as t
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 from typing import Optional
 
@@ -135,23 +136,41 @@ class MatchCache:
     from the two frames (``engine.features.extract``, ~40 ms a frame). ``engine.sphere``
     matches them and fits the model; without those modules (an older engine) there are
     no matches and the pair view shows the aligned pair alone. ``clear`` when the map or
-    the recording changes.
+    the recording changes. Computing one pair takes ~0.2-0.8 s (SIFT on two frames and
+    RANSAC, measured on this project's shared 2-core machine), so the pair view calls it
+    from a worker thread and shows the pair at once, the matches when they are ready.
     """
 
     def __init__(self, doc, cache, capacity: int = 64) -> None:
         self.doc, self.cache, self.capacity = doc, cache, capacity
         self._pairs: dict = {}
+        self._lock = threading.Lock()   # filled by a worker thread, read by the UI
 
     def clear(self) -> None:
-        self._pairs = {}
+        with self._lock:
+            self._pairs = {}
+
+    def has(self, key) -> bool:
+        with self._lock:
+            return tuple(int(k) for k in key) in self._pairs
+
+    def peek(self, key) -> Optional[PairMatches]:
+        """The matches of ``key`` if computed already, else None (never computes)."""
+        with self._lock:
+            return self._pairs.get(tuple(int(k) for k in key))
 
     def __call__(self, key) -> Optional[PairMatches]:
+        """The matches of ``key``, computed now if needed (slow: call it off the UI thread)."""
         key = tuple(int(k) for k in key)
-        if key not in self._pairs:
+        with self._lock:
+            if key in self._pairs:
+                return self._pairs[key]
+        found = self._compute(key)
+        with self._lock:
             if len(self._pairs) >= self.capacity:
                 self._pairs.pop(next(iter(self._pairs)))
-            self._pairs[key] = self._compute(key)
-        return self._pairs[key]
+            self._pairs[key] = found
+        return found
 
     def _compute(self, key) -> Optional[PairMatches]:
         try:

@@ -13,6 +13,7 @@ above. A pair without geometry still shows aligned. Decision buttons sit below.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Optional
 
 import numpy as np
@@ -36,6 +37,7 @@ class PairView(QWidget):
     decide = Signal(str)          # "confirmed" | "rejected" | "auto"
     addManual = Signal(object)    # LoopKey of a pair that is not a loop yet
     removeManual = Signal(object)
+    matchesReady = Signal(object)  # LoopKey whose matches the worker thread has computed
 
     def __init__(self, doc: Document, cache: FrameCache, parent: Optional[QWidget] = None) -> None:
         super().__init__(parent)
@@ -48,6 +50,10 @@ class PairView(QWidget):
         # Where the matched features of a pair come from (None: no geometry).
         self.match_cache = MatchCache(doc, cache)
         self.matches_for: Optional[MatchesFor] = self.match_cache
+        # The geometry of a new pair is computed in one background thread (~0.2-0.8 s a pair).
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pair-matches")
+        self._pending: set = set()
+        self.matchesReady.connect(self._matches_arrived)
         self._image_size = (0, 0)
         self.side_by_side = False
         self.cand_offset = (0.0, 0.0)   # top-left corner of the candidate in view coordinates
@@ -149,7 +155,7 @@ class PairView(QWidget):
         du, dv = self.doc.node_data(u), self.doc.node_data(v)
         attrs = self.doc.loop_attrs(key)
         a, b = self.cache.get(key[0]), self.cache.get(key[1])
-        self.matches = self.matches_for(key) if self.matches_for is not None else None
+        self.matches, waiting = self._matches_of(key)
         self.yaw, self.yaw_score = None, None
         yaw_source = ""
         if attrs is not None and attrs.get("yaw") is not None and np.isfinite(attrs["yaw"]):
@@ -174,7 +180,7 @@ class PairView(QWidget):
                            f"{state} &nbsp;·&nbsp; {yaw_text}")
         lines = evidence_lines(attrs, self.matches, sim)
         if self.matches is None and shown:
-            lines.append("no feature matches for this pair")
+            lines.append("matching features…" if waiting else "no feature matches for this pair")
         self.evidence.setText(" &nbsp;·&nbsp; ".join(lines))
         aligned = " (rolled to align)" if self.yaw is not None else ""
         self.caption.setText(f"{_caption('Query', u, du)} &nbsp;·&nbsp; {_caption('Candidate', v, dv)}{aligned}"
@@ -253,6 +259,36 @@ class PairView(QWidget):
         pts = np.concatenate([inl.reshape(-1, 2), out.reshape(-1, 2)]) if on else np.zeros((0, 2))
         colours = [INLIER_COLOR] * (2 * len(inl)) + [OUTLIER_COLOR] * (2 * len(out)) if on else []
         self.points_item.setData(x=pts[:, 0], y=pts[:, 1], brush=[pg.mkBrush(c) for c in colours])
+
+    def _matches_of(self, key) -> tuple[Optional[PairMatches], bool]:
+        """(matches of ``key`` known now, whether they are being computed in the background)."""
+        if self.matches_for is None:
+            return None, False
+        if self.matches_for is not self.match_cache:   # a plain provider: ask it directly
+            return self.matches_for(key), False
+        if self.match_cache.has(key):
+            return self.match_cache.peek(key), False
+        if key not in self._pending:
+            self._pending.add(key)
+            future = self._pool.submit(self.match_cache, key)
+            future.add_done_callback(lambda _f, k=key: self._announce(k))
+        return None, True
+
+    def _announce(self, key) -> None:
+        """In the worker thread: tell the UI thread (queued) that ``key`` is done."""
+        try:
+            self.matchesReady.emit(key)
+        except RuntimeError:   # the view was closed meanwhile
+            pass
+
+    def _matches_arrived(self, key) -> None:
+        self._pending.discard(key)
+        if self.key == key:
+            self.refresh()
+
+    def shutdown(self) -> None:
+        """Stop the background matching (the window closes)."""
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
     def _map_replaced(self) -> None:
         self.match_cache.clear()

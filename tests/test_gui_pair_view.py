@@ -94,11 +94,12 @@ def test_loop_evidence_numbers_are_shown(pair):
     assert "4.20" in text and "37/60" in text and "61 %" in text and "support 5.5" in text
 
 
-def test_real_matches_of_a_revisit_are_aligned_inliers(pair):
+def test_real_matches_of_a_revisit_are_aligned_inliers(pair, qtbot):
     pytest.importorskip("engine.sphere")
     view, _, _ = pair
     view.show_pair((0, 15))   # the view's own match cache: features extracted, two-view geometry fitted
-    assert view.matches is not None
+    assert view.matches is None and "matching features" in view.evidence.text(), "computed in the background"
+    qtbot.waitUntil(lambda: view.matches is not None, timeout=20_000)
     inliers, outliers = view.match_segments_shown()
     assert len(inliers) >= 20 and len(inliers) > 3 * len(outliers), "a revisit has many inliers"
     dx, dy = view.cand_offset
