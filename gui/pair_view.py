@@ -26,6 +26,9 @@ from .frame_cache import FrameCache
 from .pair_evidence import MatchCache, PairMatches, evidence_lines, match_segments
 from .style import INLIER_COLOR, OUTLIER_COLOR, STATUS_COLORS, panorama_view
 
+# Most match lines drawn of each kind (inliers, outliers): beyond ~60 lines the images vanish
+# under them (seen on the demo screenshots); every matched point is still marked.
+MAX_LINES = 60
 # Gap between the two panoramas, as a fraction of their height (stacked) or width (side by
 # side): room for the match lines to be seen between them.
 GAP_FRACTION = 0.12
@@ -80,8 +83,9 @@ class PairView(QWidget):
         self.view.addItem(self.query_image)
         self.view.addItem(self.cand_image)
         self.outlier_item = pg.PlotDataItem(pen=pg.mkPen(OUTLIER_COLOR, width=1), connect="pairs")
-        self.outlier_item.setOpacity(0.7)
-        self.inlier_item = pg.PlotDataItem(pen=pg.mkPen(INLIER_COLOR, width=1.5), connect="pairs")
+        self.outlier_item.setOpacity(0.6)
+        self.inlier_item = pg.PlotDataItem(pen=pg.mkPen(INLIER_COLOR, width=1.2), connect="pairs")
+        self.inlier_item.setOpacity(0.75)
         self.points_item = pg.ScatterPlotItem(size=5, pen=pg.mkPen("k", width=0.5))
         for item in (self.outlier_item, self.inlier_item, self.points_item):
             self.view.addItem(item)
@@ -254,6 +258,8 @@ class PairView(QWidget):
         inl, out = self._segments
         on = self.show_matches.isChecked()
         for item, seg in ((self.inlier_item, inl), (self.outlier_item, out)):
+            if len(seg) > MAX_LINES:   # evenly spread over the matches, the same ones every time
+                seg = seg[np.linspace(0, len(seg) - 1, MAX_LINES).astype(int)]
             pts = seg.reshape(-1, 2) if on else np.zeros((0, 2))
             item.setData(pts[:, 0], pts[:, 1], connect="pairs")
         pts = np.concatenate([inl.reshape(-1, 2), out.reshape(-1, 2)]) if on else np.zeros((0, 2))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 
@@ -82,23 +83,24 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
             app.processEvents()
 
     settle()
+    wait_until = time.monotonic() + 60   # the pair view's feature matches, computed in the background
+    while w.pair_view._pending and time.monotonic() < wait_until:
+        app.processEvents()
+        time.sleep(0.05)
+    settle()
     saved = []
-    if os.environ.get("PANOTOPO_SHOT_DEBUG"):
-        print("window", w.size(), "min", w.minimumSizeHint(), file=sys.stderr)
-        for name in ("frame_viewer", "node_panel", "graph_view", "loop_table", "pair_view", "params_dock",
-                     "eval_dock", "tabs", "left_splitter", "main_splitter", "bottom_splitter"):
-            o = getattr(w, name)
-            print(name, o.width(), "min", o.minimumSizeHint().width(), file=sys.stderr)
 
     def save(widget, name: str) -> None:
         path = out / name
         widget.grab().save(str(path))
+        _shrink_png(path)
         saved.append(path)
 
     if os.environ.get("PANOTOPO_SHOT_ROOT"):
         import subprocess
 
         subprocess.run(["import", "-window", "root", str(out / "screen.png")], check=True)
+        _shrink_png(out / "screen.png")
         saved.append(out / "screen.png")
     save(w, "main_window.png")
     save(w.frame_viewer, "frame_viewer.png")
@@ -118,6 +120,21 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
     w._extra_dirty = False
     w.close()
     return saved
+
+
+# Pictures for the docs stay small: over this size a PNG is stored with a 256-colour palette.
+MAX_PNG_BYTES = 300_000
+
+
+def _shrink_png(path: Path) -> None:
+    """Re-save ``path`` with a 256-colour palette when it is over ``MAX_PNG_BYTES``."""
+    if path.stat().st_size <= MAX_PNG_BYTES:
+        return
+    from PIL import Image
+
+    with Image.open(path) as img:
+        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    small.save(path, optimize=True)
 
 
 if __name__ == "__main__":

@@ -48,14 +48,16 @@ def colour_pixels(widget, colour: str, tol: int = 40, centre=None, radius: int =
     """How many pixels of ``widget`` (rendered) are within ``tol`` of ``colour``, near ``centre``."""
     from PySide6.QtGui import QColor
 
-    img = widget.grab().toImage().convertToFormat(widget.grab().toImage().Format.Format_RGB888)
+    pixmap = widget.grab()
+    img = pixmap.toImage()
+    img = img.convertToFormat(img.Format.Format_RGB888)
     w, h = img.width(), img.height()
     arr = np.frombuffer(img.constBits(), dtype=np.uint8, count=img.bytesPerLine() * h)
     arr = arr.reshape(h, img.bytesPerLine())[:, : 3 * w].reshape(h, w, 3).astype(int)
     c = QColor(colour)
     near = np.abs(arr - np.array([c.red(), c.green(), c.blue()])).max(axis=2) <= tol
     if centre is not None:
-        ratio = widget.grab().devicePixelRatio()
+        ratio = pixmap.devicePixelRatio()
         yy, xx = np.mgrid[0:h, 0:w]
         near &= np.hypot(xx - centre[0] * ratio, yy - centre[1] * ratio) <= radius * ratio
     return int(near.sum())

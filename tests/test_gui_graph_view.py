@@ -35,7 +35,6 @@ def view(qtbot):
 
 def test_a_loop_between_two_nodes_at_one_place_is_visible(view):
     v = view()
-    v.grab().save("/tmp/gb/graph.png")
     for key, status, node in (((0, 19), "confirmed", 19), ((4, 14), "manual", 14)):
         centre = v.plot.mapTo(v, v.node_screen_pos(node))
         pixels = colour_pixels(v, STATUS_COLORS[status], centre=(centre.x(), centre.y()), radius=60)
