@@ -31,7 +31,7 @@ from .graph_view import GraphView
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
 from .pair_evidence import pair_yaw
-from .window_layout import split_for_narrow_window
+from .window_layout import split_views
 from .node_panel import NodePanel
 from .pair_view import PairView
 from .params_panel import ParamsPanel
@@ -1041,18 +1041,7 @@ class MainWindow(QMainWindow):
             QTimer.singleShot(0, self._initial_split)
 
     def _initial_split(self) -> None:
-        total = self.main_splitter.width()
-        if 400 < total < 1100:  # gui-b: a 1280-px screen (issue 14, defect 4): see split_for_narrow_window
-            return split_for_narrow_window(self)
-        if total > 400:
-            left = int(0.31 * total)
-            self.main_splitter.setSizes([left, total - left])
-            right = total - left
-            self.bottom_splitter.setSizes([int(0.55 * right), right - int(0.55 * right)])
-        height = self.left_splitter.height()
-        if height > 300:  # the viewer as tall as its two panoramas, the node panel below
-            viewer = min(int(left - 8 + 130), height - 160)
-            self.left_splitter.setSizes([viewer, height - viewer])
+        split_views(self)  # gui-b: gui.window_layout (issue 14, defects 3 and 4)
 
     # ==== drag and drop, closing ============================================================
     def dragEnterEvent(self, event: QDragEnterEvent) -> None:
