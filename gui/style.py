@@ -10,7 +10,7 @@ pg.setConfigOptions(imageAxisOrder="row-major", useOpenGL=False, antialias=True)
 
 # One colour per loop status, used by the graph, the matrix, the table and the legend.
 STATUS_COLORS = {
-    "candidate": "#d35400",  # dark orange: found, not accepted automatically, waits for a person
+    "candidate": "#b03a8c",  # plum: found, not accepted automatically, waits for a person
     "auto": "#f39c12",       # orange: accepted by the engine, a person may still decide
     "confirmed": "#27ae60",  # green
     "rejected": "#c0392b",   # red, drawn faint and dashed
