@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gui.layout import FORCE_MAX_NODES, path_layout
+from gui.layout import EMBED_MAX_NODES, path_layout
 from tests.gui_maps import make_doc
 
 
@@ -29,12 +29,12 @@ def test_a_straight_walk_is_drawn_without_crossing_itself():
         assert _crossings(x, y) == 0, f"a walk of {n} nodes with no loops crosses itself"
         steps = np.hypot(np.diff(x), np.diff(y))
         assert steps.min() > 0.5, "consecutive nodes are drawn apart"
-        # Not a spiral: the walk goes somewhere (its ends are far apart for its length).
-        assert np.hypot(x[-1] - x[0], y[-1] - y[0]) > 0.5 * steps.sum()
+        if n <= EMBED_MAX_NODES:  # not a spiral: the walk goes somewhere (ends far apart for its length)
+            assert np.hypot(x[-1] - x[0], y[-1] - y[0]) > 0.5 * steps.sum()
 
 
 def test_a_long_walk_is_laid_out_compactly_without_crossing():
-    n = FORCE_MAX_NODES + 100
+    n = EMBED_MAX_NODES + 100
     doc = make_doc(None, (), n=n)
     x, y = path_layout(doc.topomap)
     assert _crossings(x, y) == 0
@@ -48,3 +48,11 @@ def test_a_loop_pulls_its_two_places_together():
     x, y = path_layout(doc.topomap)
     gap = np.hypot(x[0] - x[-1], y[0] - y[-1])
     assert gap < 0.25 * (n - 1), "the revisit is drawn near the place it revisits"
+    assert _crossings(x, y) == 0, "a single loop is drawn as a loop, not a tangle"
+
+
+def test_a_rejected_loop_does_not_fold_the_path():
+    n = 40
+    doc = make_doc(None, [(0, n - 1, "rejected")], n=n)
+    x, y = path_layout(doc.topomap)
+    assert np.hypot(x[0] - x[-1], y[0] - y[-1]) > 0.5 * (n - 1)
