@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 from . import __version__
-from .errors import Cancelled, PanotopoError
-from .params import METHODS, MapParams
+from .errors import Cancelled, InputError, PanotopoError
+from .params import METHODS, PARAMETERS, MapParams
 
 EXIT_BAD_INPUT = 2
 EXIT_CANCELLED = 130
@@ -81,17 +81,36 @@ def _describe(args: argparse.Namespace, shift: bool):
 
 
 def _map_params(args: argparse.Namespace) -> MapParams:
-    return MapParams(
-        method=args.method, node_sim_th=args.node_sim_th, loop_sim_th=args.loop_sim_th,
-        window_size=args.window_size, count_th=args.count_th, neighbor_node_num=args.neighbor_node_num,
-        long_runs=args.long_runs,
-    )
+    params = MapParams(**{p.name: getattr(args, p.name) for p in PARAMETERS if hasattr(args, p.name)})
+    problems = params.problems()
+    if problems:
+        raise InputError(problems[0])
+    return params
+
+
+def _add_table_parameters(p: argparse.ArgumentParser) -> None:
+    """Options of the ``verified`` method, built from ``engine.params.PARAMETERS``."""
+    g = p.add_argument_group("verified method (defaults and their origin: engine/params.py)")
+    for par in PARAMETERS:
+        if par.methods == ("verified",):
+            g.add_argument("--" + par.name.replace("_", "-"), type=par.type, default=par.default,
+                           help=f"{par.help} (default: {par.default})")
 
 
 def _load_poses(path: str, topic: Optional[str]):
     from .sources import read_poses
 
     return read_poses(Path(path), topic=topic)
+
+
+def _recording_poses(args: argparse.Namespace):
+    """Positions the recording carries itself (a photo folder's EXIF GPS); --poses wins."""
+    from .sources import recording_poses
+
+    poses, warnings = recording_poses(Path(args.input), interval=args.interval)
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
+    return poses
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -121,7 +140,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         found = paper_thresholds(descs.vectors, params.neighbor_node_num)
         params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
     topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
-    poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    poses = _load_poses(args.poses, args.pose_topic) if args.poses else _recording_poses(args)
     if poses is not None:
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
@@ -261,10 +280,12 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--auto-thresholds", action="store_true",
                    help="simple / shift-simple / ours: calibrate the node and loop thresholds not given "
                         "from the recording itself (as the benchmark does) instead of the descriptor's")
+    _add_table_parameters(p)
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
-                   help="verified: skip the long-run step that finds returns with a lateral offset "
+                   help="verified-rules: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")
-    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
+    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
+                                    "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)

@@ -18,8 +18,10 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
   ``score`` float (calibrated descriptor score, standard deviations above the recording's own
   background), ``support`` float (the same along the matched stretch), ``direction`` int
   (+1 same way, -1 reverse), ``matches`` and ``inliers`` int (local features matched and
-  consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``confidence``
-  float (the ranking of the review queue).
+  consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``path_inliers``
+  int (the same measured between each end and its own path neighbour just outside the
+  temporal window: what "a few metres along the path" shares), ``confidence`` float (the
+  ranking of the review queue).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -41,7 +43,7 @@ from . import __version__
 from .descriptors.base import Descriptors
 from .errors import InputError
 from .loops import LoopCandidate
-from .params import MapParams
+from .params import PARAMETERS, MapParams
 
 STATUSES = ("auto", "candidate", "confirmed", "rejected", "manual")
 SETTABLE_STATUSES = ("auto", "candidate", "confirmed", "rejected")
@@ -53,11 +55,12 @@ _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label"
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
-               "confidence": float}
-EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "confidence")
-_GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
-                "node_sim_th": float, "loop_sim_th": float, "window_size": int,
-                "count_th": int, "neighbor_node_num": int, "interval": float, "long_runs": int}
+               "path_inliers": int, "confidence": float}
+EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
+                 "confidence")
+# Graph attributes: every map parameter with its declared type (bools stored as 0/1).
+_GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
+                **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}
 
 
 def _plain(value, kind=None):

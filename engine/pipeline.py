@@ -51,6 +51,7 @@ def describe(
     """
     from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
+    from .features import FEATURES_VERSION
     from .verify import COLUMNS_VERSION
 
     path = Path(path)
@@ -64,7 +65,7 @@ def describe(
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
-                         **model.settings()})
+                         "features": FEATURES_VERSION, **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
@@ -92,9 +93,11 @@ def describe_frames(
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
     (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
-    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset.
+    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset,
+    and the local features of each shifted frame (``Descriptors.features``) for two-view geometry.
     """
     from .colour import colour_histogram
+    from .features import FeatureTable, extract
     from .shift import apply_shift, canonical_shift
     from .verify import column_features
 
@@ -105,6 +108,7 @@ def describe_frames(
     shifts: list[int] = []
     columns: list[np.ndarray] = []
     colours: list[np.ndarray] = []
+    features: list = []
     frame_width: list[int] = []
 
     def shifted_images() -> Iterator[np.ndarray]:
@@ -117,6 +121,7 @@ def describe_frames(
             rgb = apply_shift(frame.rgb, s) if s else frame.rgb
             columns.append(column_features(rgb))
             colours.append(colour_histogram(rgb))
+            features.append(extract(rgb))
             if not frame_width:
                 frame_width.append(int(frame.rgb.shape[1]))
             yield rgb
@@ -142,15 +147,26 @@ def describe_frames(
         meta=meta,
         columns=np.stack(columns).astype(np.float16) if columns else None,
         colours=np.stack(colours).astype(np.float16) if colours else None,
+        features=FeatureTable.from_list(features) if features else None,
     )
 
 
 def descriptor_defaults(descs: Descriptors) -> dict:
-    """The calibrated thresholds for the descriptor that made ``descs``."""
+    """The calibrated thresholds for the descriptor that made ``descs``.
+
+    Stored defaults first, then the registered model's; descriptors of a model this
+    project does not know (an .npz from any other model) get thresholds calibrated from
+    the recording itself (``engine.calibrate.paper_thresholds``, sampled, fine at 100k
+    rows), with the default temporal window of MapParams.
+    """
     if descs.meta.get("defaults"):
         return dict(descs.meta["defaults"])
     name = descs.meta.get("descriptor", descriptor_registry.DEFAULT_DESCRIPTOR)
-    return descriptor_registry.defaults_for(name)
+    if name in descriptor_registry.REGISTRY:
+        return descriptor_registry.defaults_for(name)
+    from .calibrate import paper_thresholds
+
+    return paper_thresholds(descs.vectors, MapParams().neighbor_node_num)
 
 
 def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = ""):
@@ -161,7 +177,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
 
     if len(descs) == 0:
         raise InputError("no descriptors to map")
-    if params.method == "verified" and params.node_sim_th is None:
+    if params.method in ("verified", "verified-rules") and params.node_sim_th is None:
         from .calibrate import node_threshold
 
         params = replace(params, node_sim_th=node_threshold(descs.vectors))
@@ -171,13 +187,21 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
                          f"{'without' if not params.uses_shift else 'with'} --no-shift")
     node_rows = make_nodes(descs.vectors, p.node_sim_th)
+    columns = None if descs.columns is None else descs.columns[node_rows]
+    frame_width = int(descs.meta.get("frame_width", 0))
     if p.method == "verified":
+        from .loop_closure import detect_loops as verified
+
+        loops = verified(descs.vectors[node_rows], p, node_rows=node_rows,
+                         features=getattr(descs, "features", None), columns=columns,
+                         shifts=descs.shifts[node_rows], frame_width=frame_width,
+                         cache=descs.cache.setdefault(("nodes", p.node_sim_th), {}))
+    elif p.method == "verified-rules":
         from .loops_verified import verified_loops
 
-        columns = None if descs.columns is None else descs.columns[node_rows]
         colours = None if descs.colours is None else descs.colours[node_rows]
         loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
-                               int(descs.meta.get("frame_width", 0)), node_colours=colours)
+                               frame_width, node_colours=colours)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}

@@ -9,6 +9,11 @@ still load (``columns`` is then None).
 Added key (optional): ``colours`` float16 (n, 512), the colour histogram of each frame's
 horizon band (``engine.colour``), evidence of the ``verified`` method for revisits with a
 lateral offset. Files without it still load (``colours`` is then None).
+Added keys (optional, together): ``feat_offsets`` int64 (n + 1,), ``feat_uv`` float16 (N, 2),
+``feat_desc`` uint8 (N, 128): the local features of every shifted frame
+(``engine.features.FeatureTable``; frame i owns rows ``feat_offsets[i]:feat_offsets[i + 1]``,
+uv are column/row fractions of the frame) for two-view geometry (``engine.sphere``).
+Files without them still load (``features`` is then None).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ from typing import Iterable, Optional
 import numpy as np
 
 from ..errors import InputError
+from ..features import FeatureTable
 from ..progress import CancelToken, Progress
 
 
@@ -34,6 +40,10 @@ class Descriptors:
     meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
     columns: Optional[np.ndarray] = None  # float16 (n, W', F) column signatures, when computed
     colours: Optional[np.ndarray] = None  # float16 (n, 512) horizon-band colour histograms, when computed
+    features: Optional[FeatureTable] = None  # local features of each shifted frame, when computed
+    # Derived results kept in memory (retrieval, background statistics, geometry per frame
+    # pair), so that re-mapping after a threshold change is cheap; never saved.
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
@@ -41,7 +51,10 @@ class Descriptors:
     def optional_arrays(self) -> dict:
         """The added, optional .npz keys that are set (for writers of the file)."""
         extra = {"columns": self.columns, "colours": self.colours}
-        return {k: np.asarray(v, np.float16) for k, v in extra.items() if v is not None}
+        out = {k: np.asarray(v, np.float16) for k, v in extra.items() if v is not None}
+        if self.features is not None:
+            out.update(self.features.to_arrays())
+        return out
 
     def save(self, path: str | Path, vector_dtype=np.float32) -> None:
         """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
@@ -76,6 +89,11 @@ class Descriptors:
                     columns=z["columns"].astype(np.float16) if "columns" in z.files else None,
                     colours=z["colours"].astype(np.float16) if "colours" in z.files else None,
                 )
+                try:
+                    d.features = FeatureTable.from_arrays({k: z[k] for k in z.files if k.startswith("feat_")},
+                                                          frames=len(d.stamps))
+                except InputError as exc:
+                    raise InputError(f"{path}: {exc}") from None
         except InputError:
             raise
         except FileNotFoundError:
