@@ -144,11 +144,13 @@ class MatchCache:
     def __init__(self, doc, cache, capacity: int = 64) -> None:
         self.doc, self.cache, self.capacity = doc, cache, capacity
         self._pairs: dict = {}
+        self.errors: dict = {}           # why a pair could not be matched, by key
         self._lock = threading.Lock()   # filled by a worker thread, read by the UI
 
     def clear(self) -> None:
         with self._lock:
             self._pairs = {}
+            self.errors = {}
 
     def has(self, key) -> bool:
         with self._lock:
@@ -165,7 +167,11 @@ class MatchCache:
         with self._lock:
             if key in self._pairs:
                 return self._pairs[key]
-        found = self._compute(key)
+        try:
+            found = self._compute(key)
+        except Exception as exc:  # noqa: BLE001 - a pair that cannot be matched shows without matches
+            found = None          # (stored: never retried in a loop), the reason kept for the view
+            self.errors[key] = f"{type(exc).__name__}: {exc}"
         with self._lock:
             if len(self._pairs) >= self.capacity:
                 self._pairs.pop(next(iter(self._pairs)))

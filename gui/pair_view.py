@@ -184,7 +184,9 @@ class PairView(QWidget):
                            f"{state} &nbsp;·&nbsp; {yaw_text}")
         lines = evidence_lines(attrs, self.matches, sim)
         if self.matches is None and shown:
-            lines.append("matching features…" if waiting else "no feature matches for this pair")
+            failed = self.match_cache.errors.get(key)
+            lines.append("matching features…" if waiting else
+                         f"feature matching failed ({failed})" if failed else "no feature matches for this pair")
         self.evidence.setText(" &nbsp;·&nbsp; ".join(lines))
         aligned = " (rolled to align)" if self.yaw is not None else ""
         self.caption.setText(f"{_caption('Query', u, du)} &nbsp;·&nbsp; {_caption('Candidate', v, dv)}{aligned}"

@@ -99,7 +99,8 @@ def test_real_matches_of_a_revisit_are_aligned_inliers(pair, qtbot):
     view, _, _ = pair
     view.show_pair((0, 15))   # the view's own match cache: features extracted, two-view geometry fitted
     assert view.matches is None and "matching features" in view.evidence.text(), "computed in the background"
-    qtbot.waitUntil(lambda: view.matches is not None, timeout=20_000)
+    qtbot.waitUntil(lambda: not view._pending, timeout=20_000)
+    assert view.matches is not None, view.match_cache.errors
     inliers, outliers = view.match_segments_shown()
     assert len(inliers) >= 20 and len(inliers) > 3 * len(outliers), "a revisit has many inliers"
     dx, dy = view.cand_offset
@@ -140,3 +141,28 @@ def test_the_yaw_of_a_pair_comes_from_its_features(pair):
     assert abs((m.yaw - expected + 180) % 360 - 180) < 3
     yaw = pair_yaw(view.doc, cache, (0, 15), view.match_cache)
     assert abs((yaw - expected + 180) % 360 - 180) < 3
+
+
+def test_matches_from_the_runs_feature_table(pair, qtbot):
+    """The run keeps the features of each shifted frame; the view draws those, aligned."""
+    pytest.importorskip("engine.sphere")
+    from engine.features import FeatureTable, extract
+    from engine.shift import apply_shift
+
+    view, cache, _ = pair
+    descs = view.doc.descs
+    descs.shifts = np.array([cache.get(i).shift for i in range(len(descs))], dtype=np.int64)
+    descs.features = FeatureTable.from_list([extract(apply_shift(cache.get(i).rgb, int(descs.shifts[i])))
+                                             for i in range(len(descs))])
+    calls = []
+    original = descs.features.of
+    descs.features.of = lambda i: calls.append(i) or original(i)
+    view.show_pair((0, 15))
+    qtbot.waitUntil(lambda: not view._pending, timeout=20_000)
+    assert view.matches is not None, view.match_cache.errors
+    assert sorted(calls) == [0, 15], "the stored features are used, none extracted again"
+    inliers, _ = view.match_segments_shown()
+    dx, dy = view.cand_offset
+    off = np.abs(inliers[:, 0] - (inliers[:, 1] - np.array([dx, dy])))
+    off[:, 0] = np.minimum(off[:, 0], W - off[:, 0])
+    assert len(inliers) >= 20 and np.median(off) < 2.0
