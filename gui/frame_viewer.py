@@ -15,8 +15,8 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QKeyEvent
-from PySide6.QtWidgets import (QComboBox, QHBoxLayout, QLabel, QSlider, QStyle, QToolButton, QVBoxLayout,
-                               QWidget)
+from PySide6.QtWidgets import (QComboBox, QHBoxLayout, QLabel, QSizePolicy, QSlider, QStyle, QToolButton,
+                               QVBoxLayout, QWidget)
 
 from .document import Document
 from .frame_cache import FrameCache, ShownFrame
@@ -39,6 +39,10 @@ class FrameViewer(QWidget):
         self.info = QLabel("No recording open")
         self.info.setTextInteractionFlags(Qt.TextSelectableByMouse)
         self.info.setToolTip("Source frame, stamp and the map node that represents this frame")
+        # A longer header (a node "since frame …", a place name) must never widen the viewer and
+        # squeeze the panels beside it (issue 14, defect 3): its width follows the viewer's.
+        self.info.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
+        self.info.setMinimumWidth(0)
 
         self.canvas = pg.GraphicsLayoutWidget()
         self.canvas.setBackground("w")
@@ -89,18 +93,21 @@ class FrameViewer(QWidget):
         for text, value in PLAY_SPEEDS:
             self.speed.addItem(text, value)
 
+        # The timeline has a row of its own: on a narrow column (1280-px screens) the buttons
+        # would squeeze it to nothing.
         controls = QHBoxLayout()
         controls.setContentsMargins(0, 0, 0, 0)
         for w in (self.first_button, self.prev_node_button, self.prev_button, self.play_button,
                   self.next_button, self.next_node_button, self.last_button):
             controls.addWidget(w)
-        controls.addWidget(self.slider, 1)
+        controls.addStretch(1)
         controls.addWidget(self.speed)
 
         layout = QVBoxLayout(self)
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(self.info)
         layout.addWidget(self.canvas, 1)
+        layout.addWidget(self.slider)
         layout.addLayout(controls)
         layout.addStretch(0)
         self._aspect = 2.0  # width / height of the frames: the canvas is sized to fit them
@@ -260,6 +267,7 @@ class FrameViewer(QWidget):
             if data.get("label"):
                 text += f" &nbsp; · &nbsp; “{data['label']}”"
         self.info.setText(text)
+        self.info.setToolTip(text)  # the whole header, where the panel is too narrow for it
 
     def resizeEvent(self, event) -> None:
         super().resizeEvent(event)

@@ -1,9 +1,11 @@
-"""Graph view: nodes and arcs of the map, loops styled by status, with a legend.
+"""Graph view: nodes and arcs of the map, loops styled by status, toggles per status.
 
-Nodes sit at ground-truth positions when poses are loaded, else on a force
-layout of the path (``gui.layout``). Click a node: jump to its frame. Click a loop
-arc: select it. Ctrl+click a second node: propose a manual loop between it and
-the current node.
+Nodes sit at ground-truth positions when poses are loaded, else on a layout of
+the path (``gui.layout``). Every loop is a curve that bulges away from the path
+(``gui.loop_arcs``), so a true loop between two nodes at one position is visible.
+A strip above the plot (never over the path) shows one toggle per status with its
+count. Click a node: jump to its frame. Click a loop: select it. Ctrl+click a
+second node: propose a manual loop between it and the current node.
 """
 
 from __future__ import annotations
@@ -13,12 +15,13 @@ from typing import Optional
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .layout import path_layout
-from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR,
-                    STATUS_LABELS, status_pen)
+from .loop_arcs import distance_to_curves, loop_curves, nan_joined
+from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
+                    STATUS_LABELS, STATUS_ORDER, status_pen)
 
 CLICK_RADIUS_PX = 9
 
@@ -35,25 +38,32 @@ class GraphView(QWidget):
         self.y = np.zeros(0)
         self.current_node: Optional[int] = None
         self.selected_key: Optional[LoopKey] = None
-        self._loop_segments: list[tuple[LoopKey, int, int]] = []
+        self._loop_segments: list[tuple[LoopKey, int, int]] = []   # the loops drawn (shown statuses)
+        self._loop_curves = np.zeros((0, 2, 2))
 
         self.plot = pg.PlotWidget(background="w")
         self.plot.setAspectLocked(True)
         self.plot.showGrid(x=True, y=True, alpha=0.15)
         self.plot.setMenuEnabled(False)
         self.plot.getPlotItem().hideButtons()
-        self.legend = self.plot.addLegend(offset=(8, 8), labelTextColor="#222", brush=pg.mkBrush(255, 255, 255, 150),
-                                          pen=pg.mkPen("#bbb"))
         self.selected_item = pg.PlotDataItem(pen=pg.mkPen(pg.mkColor(SELECTED_COLOR), width=7))
         self.selected_item.setOpacity(0.45)
         self.plot.addItem(self.selected_item)
         self.sequential_item = pg.PlotDataItem(pen=pg.mkPen(SEQUENTIAL_COLOR, width=1.5), name="path (sequential)")
         self.plot.addItem(self.sequential_item)
         self.loop_items: dict[str, pg.PlotDataItem] = {}
-        for status in ("rejected", "auto", "confirmed", "manual"):
-            item = pg.PlotDataItem(pen=status_pen(status, width=2), name=f"loop: {STATUS_LABELS[status]}")
+        self.toggles: dict[str, QCheckBox] = {}
+        for status in reversed(STATUS_ORDER):  # rejected drawn first, below the others
+            item = pg.PlotDataItem(pen=status_pen(status, width=2), connect="finite")
             self.loop_items[status] = item
             self.plot.addItem(item)
+        for status in STATUS_ORDER:
+            box = QCheckBox(STATUS_LABELS[status])
+            box.setChecked(True)
+            box.setStyleSheet(f"QCheckBox {{ color: {STATUS_COLORS[status]}; font-weight: bold; }}")
+            box.setToolTip(f"Show the {STATUS_LABELS[status]} loops in the graph")
+            box.toggled.connect(self.redraw_loops)
+            self.toggles[status] = box
         self.nodes_item = pg.ScatterPlotItem(size=6, pen=pg.mkPen("w", width=0.5), brush=pg.mkBrush(NODE_COLOR),
                                              name="node", hoverable=True, tip=self._node_tip)
         self.plot.addItem(self.nodes_item)
@@ -71,8 +81,19 @@ class GraphView(QWidget):
         self.plot.setToolTip("Click a node to see its frame, click a loop to select it, "
                              "Ctrl+click a node to add a manual loop to the current node")
 
+        # The toggles never set the view's minimum width (they clip on a very narrow view).
+        self.toggle_strip = QWidget()
+        self.toggle_strip.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Fixed)
+        strip = QHBoxLayout(self.toggle_strip)
+        strip.setContentsMargins(4, 2, 4, 0)
+        strip.setSpacing(8)
+        for box in self.toggles.values():
+            strip.addWidget(box)
+        strip.addStretch(1)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
+        layout.setSpacing(0)
+        layout.addWidget(self.toggle_strip)
         layout.addWidget(self.plot)
 
         doc.mapReplaced.connect(self.rebuild)
@@ -94,9 +115,12 @@ class GraphView(QWidget):
         for axis in ("left", "bottom"):  # after setLabel, which shows the axis again
             self.plot.getPlotItem().showAxis(axis, with_gt)
         self.plot.showGrid(x=with_gt, y=with_gt, alpha=0.15)
-        self.plot.setTitle("Ground-truth positions" if with_gt else
-                           ("Layout of the path (no ground truth loaded)" if self.doc.has_map else ""),
-                           color="#444", size="9pt")
+        title = ("Ground-truth positions" if with_gt else
+                 ("Layout of the path (no ground truth loaded)" if self.doc.has_map else ""))
+        if title:  # the node markers' key, in the title: no legend box over the path
+            title += (" &nbsp; <span style='color:#2ecc71'>▲</span> start <span style='color:#f1c40f'>■</span> end "
+                      f"<span style='color:{CURRENT_COLOR}'>◯</span> current")
+        self.plot.setTitle(title, color="#444", size="9pt")
         n = self.x.size
         if n > 1:
             self.sequential_item.setData(_pairs(self.x, np.arange(n - 1), np.arange(1, n)),
@@ -114,20 +138,31 @@ class GraphView(QWidget):
             self.plot.autoRange(padding=0.06)
 
     def redraw_loops(self) -> None:
-        self._loop_segments = []
-        by_status: dict[str, list[tuple[int, int]]] = {s: [] for s in self.loop_items}
-        if self.doc.has_map and self.x.size:
-            for row in self.doc.loop_rows():
-                by_status.setdefault(row.status, []).append((row.index_u, row.index_v))
-                self._loop_segments.append((row.key, row.index_u, row.index_v))
+        """Draw the loops of the shown statuses as curves; count every status on its toggle."""
+        rows = self.doc.loop_rows() if self.doc.has_map and self.x.size else []
+        counts = self.loop_counts()
+        for status, box in self.toggles.items():
+            box.setText(f"{STATUS_LABELS[status]} ({counts[status]})")
+        shown = [r for r in rows if self.status_shown(r.status)]
+        self._loop_segments = [(r.key, r.index_u, r.index_v) for r in shown]
+        pairs = np.array([(a, b) for _, a, b in self._loop_segments], dtype=np.int64).reshape(-1, 2)
+        self._loop_curves = loop_curves(self.x, self.y, pairs)
+        statuses = np.array([r.status for r in shown])
         for status, item in self.loop_items.items():
-            pairs = np.array(by_status.get(status, []), dtype=np.int64).reshape(-1, 2)
-            if pairs.size:
-                item.setData(_pairs(self.x, pairs[:, 0], pairs[:, 1]), _pairs(self.y, pairs[:, 0], pairs[:, 1]),
-                             connect="pairs")
-            else:
-                item.setData([], [])
+            item.setData(*nan_joined(self._loop_curves[statuses == status]), connect="finite")
         self.set_selected_loop(self.selected_key)
+
+    def status_shown(self, status: str) -> bool:
+        """Whether loops of ``status`` are drawn (its toggle is on; unknown statuses always)."""
+        box = self.toggles.get(status)
+        return box is None or box.isChecked()
+
+    def loop_counts(self) -> dict[str, int]:
+        """Number of loops per status, as the toggles show them."""
+        counts = {s: 0 for s in STATUS_ORDER}
+        for row in self.doc.loop_rows() if self.doc.has_map else []:
+            counts[row.status] = counts.get(row.status, 0) + 1
+        return counts
 
     def redraw_labels(self) -> None:
         for item in self.label_items:
@@ -158,8 +193,8 @@ class GraphView(QWidget):
             u, v = self.doc.nodes_of(key)  # a pair that is not a loop (from the matrix)
             match = [(int(self.doc.node_data(u)["index"]), int(self.doc.node_data(v)["index"]))]
         if match and self.x.size:
-            a, b = match[0]
-            self.selected_item.setData([self.x[a], self.x[b]], [self.y[a], self.y[b]])
+            curve = loop_curves(self.x, self.y, np.array(match[:1]))
+            self.selected_item.setData(*nan_joined(curve), connect="finite")
         else:
             self.selected_item.setData([], [])
 
@@ -207,22 +242,25 @@ class GraphView(QWidget):
         return k, float(d[k])
 
     def nearest_loop(self, x: float, y: float) -> tuple[Optional[LoopKey], float]:
+        """Nearest drawn loop curve and its distance in screen pixels."""
         if not self._loop_segments:
             return None, np.inf
         px, py = self._pixel_scale()
-        ia = np.array([a for _, a, _ in self._loop_segments])
-        ib = np.array([b for _, _, b in self._loop_segments])
-        ax, ay = self.x[ia] / px, self.y[ia] / py
-        bx, by = self.x[ib] / px, self.y[ib] / py
-        qx, qy = x / px, y / py
-        dx, dy = bx - ax, by - ay
-        t = np.clip(((qx - ax) * dx + (qy - ay) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0, 1)
-        d = np.hypot(ax + t * dx - qx, ay + t * dy - qy)
+        d = distance_to_curves(self._loop_curves, x, y, px, py)
         i = int(np.argmin(d))
         return self._loop_segments[i][0], float(d[i])
 
+    def loop_apex(self, key: LoopKey):
+        """Coordinates (in ``self.plot``) of the middle of the curve of loop ``key``, or None."""
+        for i, (k, _, _) in enumerate(self._loop_segments):
+            if k == key:
+                mid = self._loop_curves[i, self._loop_curves.shape[1] // 2]
+                vb = self.plot.getPlotItem().getViewBox()
+                return self.plot.mapFromScene(vb.mapViewToScene(pg.Point(float(mid[0]), float(mid[1]))))
+        return None
+
     def node_screen_pos(self, k: int):
-        """Widget coordinates of node ``k`` (for tests and tooltips)."""
+        """Coordinates of node ``k`` in the plot widget (``self.plot``), for tests and tooltips."""
         vb = self.plot.getPlotItem().getViewBox()
         scene = vb.mapViewToScene(pg.Point(float(self.x[k]), float(self.y[k])))
         return self.plot.mapFromScene(scene)

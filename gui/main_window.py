@@ -30,6 +30,8 @@ from .frame_viewer import FrameViewer
 from .graph_view import GraphView
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
+from .pair_evidence import pair_yaw
+from .window_layout import split_views
 from .node_panel import NodePanel
 from .pair_view import PairView
 from .params_panel import ParamsPanel
@@ -714,7 +716,8 @@ class MainWindow(QMainWindow):
 
     def add_manual_loop(self, key: LoopKey) -> bool:
         try:
-            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key)))
+            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache.peek)  # gui-b: issue 14, 8
+            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key), yaw))
         except InputError as exc:
             self.warn(str(exc))
             return False
@@ -1040,16 +1043,7 @@ class MainWindow(QMainWindow):
             QTimer.singleShot(0, self._initial_split)
 
     def _initial_split(self) -> None:
-        total = self.main_splitter.width()
-        if total > 400:
-            left = int(0.31 * total)
-            self.main_splitter.setSizes([left, total - left])
-            right = total - left
-            self.bottom_splitter.setSizes([int(0.55 * right), right - int(0.55 * right)])
-        height = self.left_splitter.height()
-        if height > 300:  # the viewer as tall as its two panoramas, the node panel below
-            viewer = min(int(left - 8 + 130), height - 160)
-            self.left_splitter.setSizes([viewer, height - viewer])
+        split_views(self)  # gui-b: gui.window_layout (issue 14, defects 3 and 4)
 
     # ==== drag and drop, closing ============================================================
     def dragEnterEvent(self, event: QDragEnterEvent) -> None:
@@ -1075,6 +1069,7 @@ class MainWindow(QMainWindow):
         """Stop the worker thread and timers and release the recording."""
         self.autosave_timer.stop()
         self.frame_viewer.shutdown()
+        self.pair_view.shutdown()
         self.runner.stop()
         self.doc.close()
 

@@ -7,7 +7,7 @@ from typing import Optional
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QListWidget,
-                               QListWidgetItem, QPushButton, QVBoxLayout, QWidget)
+                               QListWidgetItem, QPushButton, QSizePolicy, QVBoxLayout, QWidget)
 
 from .document import Document
 from .style import STATUS_COLORS
@@ -26,6 +26,10 @@ class NodePanel(QWidget):
         self.title = QLabel("No map yet")
         self.details = QLabel("")
         self.details.setTextInteractionFlags(Qt.TextSelectableByMouse)
+        # Long details wrap instead of widening the left column (1280-px screens, issue 14 defect 4).
+        for label in (self.title, self.details):
+            label.setWordWrap(True)
+            label.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
         self.name = QLineEdit()
         self.name.setPlaceholderText("e.g. kitchen, lab door, crossing A")
         self.name.setToolTip("Place name of this node (Enter to apply; undo with Ctrl+Z)")

@@ -1,10 +1,13 @@
 """Pictures of every view for the docs, from a real run on a synthetic recording.
 
-``python -m gui.screenshots docs/screenshots`` renders the demo route (512x256),
-runs the engine in the real window, curates a few loops and saves:
-main_window.png, frame_viewer.png, graph_view.png, similarity_matrix.png,
-pair_view.png, loop_table.png, parameters.png, evaluation.png and
-graph_view_layout.png (the graph without ground truth).
+``python -m gui.screenshots docs/screenshots [WIDTHxHEIGHT]`` renders the demo route
+(512x256), runs the engine in the real window (at that size, default 1600x1000),
+curates a few loops and saves: main_window.png, frame_viewer.png, graph_view.png,
+similarity_matrix.png, pair_view.png, loop_table.png, parameters.png,
+evaluation.png and graph_view_layout.png (the graph without ground truth).
+With ``PANOTOPO_SHOT_ROOT=1`` (set by packaging/xvfb_screenshots.sh) the main
+window is also captured from the X server's screen (``import -window root``), as a
+person would see it, into screen.png.
 """
 
 from __future__ import annotations
@@ -12,11 +15,12 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 
 def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified",
-                     work_dir: str | None = None) -> list[Path]:
+                     work_dir: str | None = None, size: tuple[int, int] = (1600, 1000)) -> list[Path]:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from PySide6.QtCore import QEventLoop, QSettings
     from PySide6.QtWidgets import QApplication
@@ -34,7 +38,7 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
     app = QApplication.instance() or QApplication(["panotopo"])
     settings = QSettings(str(work / "settings.ini"), QSettings.IniFormat)
     w = MainWindow(settings=settings, interactive=False)
-    w.resize(1600, 1000)
+    w.setGeometry(0, 0, *size)
     # The default method, as a user sees it on first run (pass "ours" for more candidates).
     w.params_panel.method.setCurrentIndex(w.params_panel.method.findData(method))
     w.show()
@@ -79,13 +83,25 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
             app.processEvents()
 
     settle()
+    wait_until = time.monotonic() + 60   # the pair view's feature matches, computed in the background
+    while w.pair_view._pending and time.monotonic() < wait_until:
+        app.processEvents()
+        time.sleep(0.05)
+    settle()
     saved = []
 
     def save(widget, name: str) -> None:
         path = out / name
         widget.grab().save(str(path))
+        _shrink_png(path)
         saved.append(path)
 
+    if os.environ.get("PANOTOPO_SHOT_ROOT"):
+        import subprocess
+
+        subprocess.run(["import", "-window", "root", str(out / "screen.png")], check=True)
+        _shrink_png(out / "screen.png")
+        saved.append(out / "screen.png")
     save(w, "main_window.png")
     save(w.frame_viewer, "frame_viewer.png")
     save(w.graph_view, "graph_view.png")
@@ -106,6 +122,22 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
     return saved
 
 
+# Pictures for the docs stay small: over this size a PNG is stored with a 256-colour palette.
+MAX_PNG_BYTES = 300_000
+
+
+def _shrink_png(path: Path) -> None:
+    """Re-save ``path`` with a 256-colour palette when it is over ``MAX_PNG_BYTES``."""
+    if path.stat().st_size <= MAX_PNG_BYTES:
+        return
+    from PIL import Image
+
+    with Image.open(path) as img:
+        small = img.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    small.save(path, optimize=True)
+
+
 if __name__ == "__main__":
-    for p in make_screenshots(sys.argv[1] if len(sys.argv) > 1 else "docs/screenshots"):
+    shot_size = tuple(int(v) for v in sys.argv[2].split("x")) if len(sys.argv) > 2 else (1600, 1000)
+    for p in make_screenshots(sys.argv[1] if len(sys.argv) > 1 else "docs/screenshots", size=shot_size):
         print(p)

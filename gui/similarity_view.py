@@ -15,7 +15,7 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
-from .style import SELECTED_COLOR, STATUS_COLORS, STATUS_LABELS
+from .style import SELECTED_COLOR, STATUS_COLORS, STATUS_LABELS, STATUS_ORDER
 
 
 class SimilarityView(QWidget):
@@ -41,7 +41,7 @@ class SimilarityView(QWidget):
         self.markers: dict[str, pg.ScatterPlotItem] = {}
         self.legend = self.plot.addLegend(offset=(-8, 8), labelTextColor="#222",
                                           brush=pg.mkBrush(255, 255, 255, 220), pen=pg.mkPen("#bbb"))
-        for status in ("auto", "confirmed", "rejected", "manual"):
+        for status in STATUS_ORDER:
             symbol = "x" if status == "rejected" else "o"
             item = pg.ScatterPlotItem(size=9, symbol=symbol, pen=pg.mkPen(STATUS_COLORS[status], width=2),
                                       brush=None, name=STATUS_LABELS[status])

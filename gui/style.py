@@ -10,22 +10,29 @@ pg.setConfigOptions(imageAxisOrder="row-major", useOpenGL=False, antialias=True)
 
 # One colour per loop status, used by the graph, the matrix, the table and the legend.
 STATUS_COLORS = {
-    "auto": "#f39c12",       # orange: waits for a decision
+    "candidate": "#b03a8c",  # plum: found, not accepted automatically, waits for a person
+    "auto": "#f39c12",       # orange: accepted by the engine, a person may still decide
     "confirmed": "#27ae60",  # green
     "rejected": "#c0392b",   # red, drawn faint and dashed
     "manual": "#2e86de",     # blue
 }
 STATUS_LABELS = {
-    "auto": "candidate (auto)",
+    "candidate": "candidate",
+    "auto": "auto",
     "confirmed": "confirmed",
     "rejected": "rejected",
     "manual": "manual",
 }
+# The order in which the views list the statuses (toggles, legends).
+STATUS_ORDER = ("candidate", "auto", "confirmed", "manual", "rejected")
 SEQUENTIAL_COLOR = "#7f8c8d"
 NODE_COLOR = "#34495e"
 CURRENT_COLOR = "#e84393"
 SELECTED_COLOR = "#8e44ad"
 CANONICAL_COLOR = "#e84393"
+# Matched features in the pair view, as RTAB-Map draws them: inliers green, outliers red.
+INLIER_COLOR = "#00e640"
+OUTLIER_COLOR = "#ff3030"
 
 
 def status_pen(status: str, width: float = 2.0, selected: bool = False):
@@ -33,6 +40,8 @@ def status_pen(status: str, width: float = 2.0, selected: bool = False):
     if status == "rejected":
         color.setAlpha(150)
         return pg.mkPen(color, width=width, style=Qt.DashLine)
+    if status == "candidate":
+        return pg.mkPen(color, width=width * (2 if selected else 1), style=Qt.DashDotLine)
     return pg.mkPen(color, width=width * (2 if selected else 1))
 
 

@@ -1,0 +1,58 @@
+"""The path layout used without ground truth: a straight walk never crosses itself."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gui.layout import EMBED_MAX_NODES, path_layout
+from tests.gui_maps import make_doc
+
+
+def _crossings(x: np.ndarray, y: np.ndarray) -> int:
+    """Pairs of non-adjacent path segments that properly intersect."""
+    p = np.stack([x, y], axis=1)
+    a, b = p[:-1], p[1:]
+    i, j = np.triu_indices(len(a), k=2)
+
+    def orient(p1, p2, q):
+        return np.sign((p2[:, 0] - p1[:, 0]) * (q[:, 1] - p1[:, 1]) - (p2[:, 1] - p1[:, 1]) * (q[:, 0] - p1[:, 0]))
+
+    o1, o2 = orient(a[i], b[i], a[j]), orient(a[i], b[i], b[j])
+    o3, o4 = orient(a[j], b[j], a[i]), orient(a[j], b[j], b[i])
+    return int(np.count_nonzero((o1 * o2 < 0) & (o3 * o4 < 0)))
+
+
+def test_a_straight_walk_is_drawn_without_crossing_itself():
+    for n in (12, 80, 300, 600):
+        doc = make_doc(None, (), n=n)
+        x, y = path_layout(doc.topomap)
+        assert _crossings(x, y) == 0, f"a walk of {n} nodes with no loops crosses itself"
+        steps = np.hypot(np.diff(x), np.diff(y))
+        assert steps.min() > 0.5, "consecutive nodes are drawn apart"
+        if n <= EMBED_MAX_NODES:  # not a spiral: the walk goes somewhere (ends far apart for its length)
+            assert np.hypot(x[-1] - x[0], y[-1] - y[0]) > 0.5 * steps.sum()
+
+
+def test_a_long_walk_is_laid_out_compactly_without_crossing():
+    n = EMBED_MAX_NODES + 100
+    doc = make_doc(None, (), n=n)
+    x, y = path_layout(doc.topomap)
+    assert _crossings(x, y) == 0
+    width, height = np.ptp(x), np.ptp(y)
+    assert 0.5 < width / height < 8, "a long walk fills a graph view instead of being a thin line"
+
+
+def test_a_loop_pulls_its_two_places_together():
+    n = 40
+    doc = make_doc(None, [(0, n - 1, "auto")], n=n)
+    x, y = path_layout(doc.topomap)
+    gap = np.hypot(x[0] - x[-1], y[0] - y[-1])
+    assert gap < 0.25 * (n - 1), "the revisit is drawn near the place it revisits"
+    assert _crossings(x, y) == 0, "a single loop is drawn as a loop, not a tangle"
+
+
+def test_a_rejected_loop_does_not_fold_the_path():
+    n = 40
+    doc = make_doc(None, [(0, n - 1, "rejected")], n=n)
+    x, y = path_layout(doc.topomap)
+    assert np.hypot(x[0] - x[-1], y[0] - y[-1]) > 0.5 * (n - 1)
