@@ -57,10 +57,11 @@ class SimilarityView(QWidget):
         layout.addWidget(self.glw)
 
         doc.mapReplaced.connect(self.rebuild)
+        doc.similarityReady.connect(self.rebuild)  # computed off the UI thread (gui.background)
         doc.loopsChanged.connect(self.redraw_loops)
 
     def rebuild(self) -> None:
-        sim = self.doc.similarity()
+        sim = self.doc.similarity() if self.doc.similarity_ready() else None
         if sim is None:
             self.image.clear()
             self.selected.setData([], [])
@@ -93,7 +94,7 @@ class SimilarityView(QWidget):
         self.selected.setData([b + 0.5, a + 0.5], [a + 0.5, b + 0.5])
 
     def _clicked(self, event) -> None:
-        sim = self.doc.similarity()
+        sim = self.doc.similarity() if self.doc.similarity_ready() else None
         if event.button() != Qt.LeftButton or sim is None:
             return
         vb = self.plot.getViewBox()
