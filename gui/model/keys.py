@@ -118,8 +118,9 @@ README_END = "<!-- /keys -->"
 
 def readme_section(table: Iterable[Shortcut] = SHORTCUTS) -> str:
     """The README's key list (between ``README_START`` and ``README_END``)."""
-    lines = [README_START, "", "| Area | Keys | Action |", "| --- | --- | --- |"]
+    lines = [README_START, "", "| Area | Keys | Action | Settings name |", "| --- | --- | --- | --- |"]
     for s in table:
-        lines.append(f"| {s.area} | {' or '.join(f'`{k}`' for k in s.keys)} | {s.text} |")
+        name = "(fixed)" if s.fixed else f"`{s.action}`"
+        lines.append(f"| {s.area} | {' or '.join(f'`{k}`' for k in s.keys)} | {s.text} | {name} |")
     lines += ["", README_END]
     return "\n".join(lines)
