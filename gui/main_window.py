@@ -293,6 +293,7 @@ class MainWindow(QMainWindow):
         # Bound methods, not lambdas: Qt drops these connections when the window dies.
         self.undo_stack.cleanChanged.connect(self._update_title)
         self.undo_stack.indexChanged.connect(self._update_actions)
+        self.undo_stack.indexChanged.connect(self._undo_moved)
         self.runner.progress.connect(self._on_progress)
         self.runner.finished.connect(self._on_run_finished)
         self.runner.failed.connect(self._on_run_failed)
@@ -1139,8 +1140,17 @@ class MainWindow(QMainWindow):
                            if self.doc.has_map and k is not None else "")
                 if self.node_panel.name.text().strip() == applied:
                     event.ignore()
+                    self._name_follows_undo = True
                     return True  # not the field's: the window's Undo/Redo action runs
         return super().eventFilter(watched, event)
+
+    def _undo_moved(self, *_args) -> None:
+        """After an undo/redo typed in the place-name field, the field shows the name now applied."""
+        if getattr(self, "_name_follows_undo", False):
+            self._name_follows_undo = False
+            k = self.node_panel.node_index
+            if self.doc.has_map and k is not None:
+                self.node_panel.name.setText(self.doc.label_of_frame(int(self.doc.node_frames()[k])))
 
     def show_about(self) -> None:
         from engine import __version__

@@ -95,6 +95,8 @@ class PairView(QWidget):
             self.query_image.clear()
             self.cand_image.clear()
             self.title.setText("Select a loop candidate in the table, the graph or the matrix")
+            self.query_title.setText("Query")          # no caption of a pair no longer shown (defect 5)
+            self.cand_title.setText("Candidate")
             self._update_buttons()
             return
         u, v = self.doc.nodes_of(key)
