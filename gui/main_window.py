@@ -716,29 +716,35 @@ class MainWindow(QMainWindow):
         self._remap(new)
 
     def _remap(self, params: MapParams) -> None:
-        """Build the map with ``params`` off the UI thread; the newest request wins."""
+        """Build and prepare the map with ``params`` off the UI thread; the newest request wins."""
         from engine.pipeline import build_map
 
         descs, source = self.doc.descs, str(self.doc.input_path)
         self.statusBar().showMessage("Rebuilding the map…")
-        self.remapper.submit(lambda: build_map(descs, params, source=source),
-                             lambda topomap: self._remapped(descs, params, topomap),
-                             lambda exc: self._remap_failed(exc))
+        job = self.doc.remap_job(lambda: build_map(descs, params, source=source))
+        self.remapper.submit(job, lambda prepared: self._remapped(descs, params, prepared),
+                             lambda exc: self._remap_failed(descs, params, exc))
 
-    def _remap_failed(self, exc: BaseException) -> None:
+    def _remap_failed(self, descs, params: MapParams, exc: BaseException) -> None:
+        if self.doc.descs is not descs or self.doc.params != params:
+            return
         if isinstance(exc, InputError):
             self.warn(str(exc))
+        elif isinstance(exc, RuntimeError) and "changed size during iteration" in str(exc):
+            self._remap(params)  # a manual loop was added while the worker read the decisions
         else:
             self.error(f"unexpected error: {exc.__class__.__name__}: {exc}")
 
-    def _remapped(self, descs, params: MapParams, topomap) -> None:
+    def _remapped(self, descs, params: MapParams, prepared) -> None:
         if self.doc.descs is not descs or self.doc.params != params:
             return  # a new run or another parameter change came in meanwhile
-        # The decisions as they are now (the user may have decided more while it built).
-        self.doc.replace_map(topomap, decisions=self.doc.decisions())
+        if not self.doc.is_current(prepared):
+            self._remap(params)  # decided (or loaded poses) while it built: build with those
+            return
+        self.doc.install(prepared)
         self.params_panel.set_params(params, self._used_defaults())
         self.statusBar().showMessage(
-            f"{self.doc.node_count()} nodes, {len(self.doc.topomap.loops())} loops with the new parameters", 5000)
+            f"{self.doc.node_count()} nodes, {len(self.doc.loop_rows())} loops with the new parameters", 5000)
         self.mapReady.emit()
 
     # ==== curation =========================================================================

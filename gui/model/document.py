@@ -68,6 +68,71 @@ class LoopRow:
         return -math.inf if value is None or math.isnan(value) else float(value)
 
 
+@dataclass
+class PreparedMap:
+    """A map made ready to show: decisions applied, indexes and rows computed.
+
+    ``prepare_map`` builds it from the map alone, so a worker thread can do all of it
+    and the UI thread only swaps it in (20,000 nodes: about a second of Python).
+    """
+
+    topomap: object                      # engine.graph.TopoMap
+    node_of_frame: dict[int, str]
+    frames: np.ndarray                   # source frame of each node, by node index
+    tiers: dict[LoopKey, str]            # the status detection gave each loop
+    rows: list[LoopRow]
+    poses: object = None                 # the poses its positions came from
+    decision_version: int = -1           # the document's decisions it carries (see MapDocument)
+
+
+def prepare_map(topomap, decisions: Optional[dict] = None, poses=None) -> PreparedMap:
+    """Index ``topomap``, note each loop's tier, apply ``decisions`` and ``poses``, make its rows.
+
+    Touches only ``topomap`` (safe in a worker thread while the UI shows another map).
+    """
+    g = topomap.graph
+    node_of_frame = {int(d["frame"]): n for n, d in g.nodes(data=True)}
+    frames = np.asarray(topomap.frames(), np.int64)
+    tiers = {_key(g, u, v): str(attrs.get("status", "auto")) for u, v, attrs in topomap.loops()}
+    if decisions:
+        topomap.apply_decisions(decisions)
+    if poses is not None:
+        x, y = poses.at(np.asarray(topomap.stamps(), np.float64))
+        topomap.set_positions(x, y)
+    return PreparedMap(topomap, node_of_frame, frames, tiers, make_loop_rows(topomap, tiers), poses)
+
+
+def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
+    """The loop arcs of ``topomap`` as rows, in node order."""
+    g = topomap.graph
+    rows = []
+    for u, v, attrs in topomap.loops():
+        iu, iv = int(g.nodes[u]["index"]), int(g.nodes[v]["index"])
+        if iu > iv:
+            u, v, iu, iv = v, u, iv, iu
+        key = _key(g, u, v)
+        status = str(attrs.get("status", "auto"))
+        inliers = _number(attrs.get("inliers"))
+        rows.append(LoopRow(
+            key=key, u=u, v=v, index_u=iu, index_v=iv,
+            similarity=float(attrs.get("similarity", float("nan"))),
+            window_count=int(attrs.get("window_count", 0) or 0),
+            yaw=_number(attrs.get("yaw")),
+            status=status,
+            tier="manual" if status == "manual" else tiers.get(key, "auto"),
+            score=_number(attrs.get("score")),
+            inliers=None if inliers is None else int(inliers),
+            inlier_ratio=_number(attrs.get("inlier_ratio")),
+            support=_number(attrs.get("support")),
+        ))
+    rows.sort(key=lambda r: (r.index_u, r.index_v))
+    return rows
+
+
+def _key(g, u: str, v: str) -> LoopKey:
+    return frames_key((g.nodes[u]["frame"], g.nodes[v]["frame"]))
+
+
 class MapDocument:
     """Recording, descriptors, map, poses and the user's edits (plain Python)."""
 
@@ -88,6 +153,8 @@ class MapDocument:
         self.journal = None                     # anything with append(record): decisions written through
         self._listeners: dict[str, list[Callable]] = {}
         self._node_of_frame: dict[int, str] = {}
+        self._frames = np.zeros(0, np.int64)
+        self.decision_version = 0               # +1 on every decision: a map prepared meanwhile is stale
         self._similarity: Optional[np.ndarray] = None
         self._rows: Optional[list[LoopRow]] = None
         self._tiers: dict[LoopKey, str] = {}    # the status detection gave each loop (for "reset")
@@ -118,18 +185,41 @@ class MapDocument:
 
     def replace_map(self, topomap, descs=None, decisions: Optional[dict] = None) -> None:
         """Show a new map; ``decisions`` (from the old map, a session or a journal) are re-applied."""
+        self.install(prepare_map(topomap, decisions, self.poses), descs)
+
+    def remap_job(self, build: Callable[[], object]) -> Callable[[], PreparedMap]:
+        """A function for a worker thread: ``build()`` a map and prepare it with today's decisions.
+
+        The decisions are read from the map shown now, in the worker; a decision made
+        while it runs bumps ``decision_version`` and ``install`` then refuses the result
+        (the caller asks again), so no decision is ever lost to a re-map.
+        """
+        old, poses, version = self.topomap, self.poses, self.decision_version
+
+        def job() -> PreparedMap:
+            decisions = old.decisions() if old is not None else {}
+            prepared = prepare_map(build(), decisions, poses)
+            prepared.decision_version = version
+            return prepared
+
+        return job
+
+    def is_current(self, prepared: PreparedMap) -> bool:
+        """Was ``prepared`` made from the decisions and poses of now?"""
+        return prepared.decision_version == self.decision_version and prepared.poses is self.poses
+
+    def install(self, prepared: PreparedMap, descs=None) -> None:
+        """Show a prepared map (the only work left on the UI thread: swapping it in)."""
         if descs is not None:
             self.descs = descs
-        self._tiers = {}
-        self.topomap = topomap
-        self._index_nodes()
-        for u, v, attrs in topomap.loops():  # before the decisions overwrite the statuses
-            self._tiers[self.key_of(u, v)] = str(attrs.get("status", "auto"))
-        if decisions:
-            topomap.apply_decisions(decisions)
+        self.topomap = prepared.topomap
+        self._node_of_frame = prepared.node_of_frame
+        self._frames = prepared.frames
+        self._tiers = prepared.tiers
+        self._rows = prepared.rows
         self._similarity = None
-        self._rows = None
-        self._update_positions()
+        if prepared.poses is not self.poses:
+            self._update_positions()
         self._notify("mapReplaced")
         self.evaluate()
 
@@ -142,16 +232,13 @@ class MapDocument:
         self._rows = None
         self._tiers = {}
         self._node_of_frame = {}
+        self._frames = np.zeros(0, np.int64)
 
     def set_poses(self, poses, path: Optional[str], topic: Optional[str] = None) -> None:
         self.poses, self.poses_path, self.poses_topic = poses, path, topic
         self._update_positions()
         self._notify("posesChanged")
         self.evaluate()
-
-    def _index_nodes(self) -> None:
-        g = self.topomap.graph
-        self._node_of_frame = {int(d["frame"]): n for n, d in g.nodes(data=True)}
 
     def _update_positions(self) -> None:
         if self.topomap is None or self.poses is None:
@@ -177,7 +264,8 @@ class MapDocument:
         return self._node_of_frame.get(int(frame))
 
     def node_frames(self) -> np.ndarray:
-        return np.asarray(self.topomap.frames(), np.int64) if self.topomap is not None else np.zeros(0, np.int64)
+        """Source frame of each node, by node index (computed once per map)."""
+        return self._frames if self.topomap is not None else np.zeros(0, np.int64)
 
     def node_at_or_before(self, frame: int) -> Optional[int]:
         """Index of the node that represents source frame ``frame`` (the last node at or before it)."""
@@ -188,9 +276,7 @@ class MapDocument:
         return max(k, 0)
 
     def key_of(self, u: str, v: str) -> LoopKey:
-        g = self.topomap.graph
-        fu, fv = int(g.nodes[u]["frame"]), int(g.nodes[v]["frame"])
-        return (fu, fv) if fu <= fv else (fv, fu)
+        return _key(self.topomap.graph, u, v)
 
     def key_of_nodes(self, a: int, b: int) -> LoopKey:
         """The key of the pair of node indices ``a``, ``b``."""
@@ -226,30 +312,7 @@ class MapDocument:
         return self._rows
 
     def _make_loop_rows(self) -> list[LoopRow]:
-        if self.topomap is None:
-            return []
-        g = self.topomap.graph
-        rows = []
-        for u, v, attrs in self.topomap.loops():
-            iu, iv = int(g.nodes[u]["index"]), int(g.nodes[v]["index"])
-            if iu > iv:
-                u, v, iu, iv = v, u, iv, iu
-            key = self.key_of(u, v)
-            status = str(attrs.get("status", "auto"))
-            rows.append(LoopRow(
-                key=key, u=u, v=v, index_u=iu, index_v=iv,
-                similarity=float(attrs.get("similarity", float("nan"))),
-                window_count=int(attrs.get("window_count", 0) or 0),
-                yaw=_number(attrs.get("yaw")),
-                status=status,
-                tier="manual" if status == "manual" else self._tiers.get(key, "auto"),
-                score=_number(attrs.get("score")),
-                inliers=None if _number(attrs.get("inliers")) is None else int(attrs["inliers"]),
-                inlier_ratio=_number(attrs.get("inlier_ratio")),
-                support=_number(attrs.get("support")),
-            ))
-        rows.sort(key=lambda r: (r.index_u, r.index_v))
-        return rows
+        return [] if self.topomap is None else make_loop_rows(self.topomap, self._tiers)
 
     def similarity(self) -> Optional[np.ndarray]:
         """Cosine similarity between every pair of nodes (computed here when not ready yet).
@@ -315,6 +378,7 @@ class MapDocument:
         The write-through hook: with a journal attached (``self.journal``), the record is
         appended to it at once, so a crash loses nothing.
         """
+        self.decision_version += 1
         if self.journal is not None:
             self.journal.append(record)
 
