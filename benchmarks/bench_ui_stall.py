@@ -43,7 +43,8 @@ def random_walk_descriptors(path: Path, n: int, dim: int = 1024, seed: int = 0) 
 
 
 class Heartbeat:
-    """A 5 ms QTimer on the UI thread; ``longest`` is the largest gap between two ticks."""
+    """A 5 ms QTimer on the UI thread; ``longest`` is the largest gap between two ticks,
+    ``gaps`` every gap over 50 ms as (seconds since start, length)."""
 
     def __init__(self) -> None:
         from PySide6.QtCore import Qt, QTimer
@@ -56,7 +57,8 @@ class Heartbeat:
         self.longest = 0.0
 
     def start(self) -> None:
-        self.last, self.longest = time.perf_counter(), 0.0
+        self.last, self.longest, self.gaps = time.perf_counter(), 0.0, []
+        self.started = self.last
         self.timer.start()
 
     def stop(self) -> float:
@@ -67,6 +69,8 @@ class Heartbeat:
     def _tick(self) -> None:
         now = time.perf_counter()
         self.longest = max(self.longest, now - self.last)
+        if now - self.last > 0.05:
+            self.gaps.append((round(self.last - self.started, 2), round(now - self.last, 3)))
         self.last = now
 
 
@@ -112,6 +116,24 @@ def main() -> int:
         print("warning: fewer nodes than frames; the walk is too smooth", file=sys.stderr)
 
     beat, worst = Heartbeat(), 0.0
+    import gc
+    gc_times, gc_start = [], {}
+
+    def on_gc(phase, info):  # full collections stop every thread: count the long ones
+        if phase == "start":
+            gc_start["t"] = time.perf_counter()
+        elif time.perf_counter() - gc_start.get("t", time.perf_counter()) > 0.03:
+            gc_times.append((info["generation"], round(time.perf_counter() - gc_start["t"], 3)))
+
+    gc.callbacks.append(on_gc)
+    shown = w._remapped
+
+    def timed_remapped(*a):  # how long swapping the new map in and refreshing the views takes
+        t = time.perf_counter()
+        shown(*a)
+        print(f"  new map shown (UI thread) at {t - beat.started:.2f} s in {1000 * (time.perf_counter() - t):.0f} ms")
+
+    w._remapped = timed_remapped
     for i in range(args.changes):
         for _ in range(20):
             app.processEvents()
@@ -123,9 +145,17 @@ def main() -> int:
             app.processEvents()
         gap = beat.stop()
         worst = max(worst, gap)
+        if gc_times:
+            print(f"  garbage collections over 30 ms (generation, s): {gc_times}")
+            gc_times.clear()
         print(f"re-map {i + 1}: {w.doc.node_count()} nodes, {len(w.doc.loop_rows())} loops, "
-              f"{took:.2f} s to the new map, longest UI stall {1000 * gap:.0f} ms")
+              f"{took:.2f} s to the new map, longest UI stall {1000 * gap:.0f} ms; gaps over 50 ms: {beat.gaps}")
     print(f"longest UI stall over {args.changes} re-maps of {w.doc.node_count()} nodes: {1000 * worst:.0f} ms")
+    beat.start()  # the same heartbeat with the app idle: what the machine itself adds
+    idle = QEventLoop()
+    QTimer.singleShot(10_000, idle.quit)
+    idle.exec()
+    print(f"baseline, app idle for 10 s: longest gap {1000 * beat.stop():.0f} ms (machine load, not the app)")
     w.undo_stack.setClean()
     w.shutdown()
     return 0

@@ -31,6 +31,7 @@ from .eval_panel import EvalPanel
 from .frame_cache import FrameCache
 from .frame_viewer import FrameViewer
 from .graph_view import GraphView
+from .layout import path_layout
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
 from .model import commands as edits
@@ -68,6 +69,7 @@ class MainWindow(QMainWindow):
         self.undo_stack = QUndoStack(self)
         self.doc.history = QtHistory(self.undo_stack, self.doc)  # the model's commands, on Qt's stack
         self.queue = ReviewQueue(self.doc)
+        self.doc.preparers["layout"] = path_layout  # the graph view's layout, made with each re-map
         self.shortcuts = shortcut_table(self.defaults["shortcuts"])
         self.runner = RunController(self)
         self.remapper = LatestOnly(self)           # build_map on a parameter change, off the UI thread

@@ -18,7 +18,7 @@ single point where a write-through journal hooks in.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
 
@@ -83,10 +83,13 @@ class PreparedMap:
     rows: list[LoopRow]
     poses: object = None                 # the poses its positions came from
     decision_version: int = -1           # the document's decisions it carries (see MapDocument)
+    extras: dict = field(default_factory=dict)  # what views asked to compute ahead (``preparers``)
 
 
-def prepare_map(topomap, decisions: Optional[dict] = None, poses=None) -> PreparedMap:
-    """Index ``topomap``, note each loop's tier, apply ``decisions`` and ``poses``, make its rows.
+def prepare_map(topomap, decisions: Optional[dict] = None, poses=None,
+                preparers: Optional[dict[str, Callable]] = None) -> PreparedMap:
+    """Index ``topomap``, note each loop's tier, apply ``decisions`` and ``poses``, make its rows,
+    and run each of ``preparers`` (name -> fn(topomap)) into ``extras``.
 
     Touches only ``topomap`` (safe in a worker thread while the UI shows another map).
     """
@@ -99,7 +102,9 @@ def prepare_map(topomap, decisions: Optional[dict] = None, poses=None) -> Prepar
     if poses is not None:
         x, y = poses.at(np.asarray(topomap.stamps(), np.float64))
         topomap.set_positions(x, y)
-    return PreparedMap(topomap, node_of_frame, frames, tiers, make_loop_rows(topomap, tiers), poses)
+    extras = {name: fn(topomap) for name, fn in (preparers or {}).items()}
+    return PreparedMap(topomap, node_of_frame, frames, tiers, make_loop_rows(topomap, tiers), poses,
+                       extras=extras)
 
 
 def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
@@ -151,6 +156,10 @@ class MapDocument:
         self.dist_th = 1.0
         self.history = History(self)            # the Qt window swaps in its QUndoStack adapter
         self.journal = None                     # anything with append(record): decisions written through
+        # name -> fn(topomap): per-map work a view wants done with the map, off the UI thread
+        # (the graph view's layout); read back with ``prepared``.
+        self.preparers: dict[str, Callable] = {}
+        self._extras: dict = {}
         self._listeners: dict[str, list[Callable]] = {}
         self._node_of_frame: dict[int, str] = {}
         self._frames = np.zeros(0, np.int64)
@@ -185,7 +194,7 @@ class MapDocument:
 
     def replace_map(self, topomap, descs=None, decisions: Optional[dict] = None) -> None:
         """Show a new map; ``decisions`` (from the old map, a session or a journal) are re-applied."""
-        self.install(prepare_map(topomap, decisions, self.poses), descs)
+        self.install(prepare_map(topomap, decisions, self.poses), descs)  # small maps, tests: here
 
     def remap_job(self, build: Callable[[], object]) -> Callable[[], PreparedMap]:
         """A function for a worker thread: ``build()`` a map and prepare it with today's decisions.
@@ -195,10 +204,11 @@ class MapDocument:
         (the caller asks again), so no decision is ever lost to a re-map.
         """
         old, poses, version = self.topomap, self.poses, self.decision_version
+        preparers = dict(self.preparers)
 
         def job() -> PreparedMap:
             decisions = old.decisions() if old is not None else {}
-            prepared = prepare_map(build(), decisions, poses)
+            prepared = prepare_map(build(), decisions, poses, preparers)
             prepared.decision_version = version
             return prepared
 
@@ -217,6 +227,7 @@ class MapDocument:
         self._frames = prepared.frames
         self._tiers = prepared.tiers
         self._rows = prepared.rows
+        self._extras = prepared.extras
         self._similarity = None
         if prepared.poses is not self.poses:
             self._update_positions()
@@ -313,6 +324,12 @@ class MapDocument:
 
     def _make_loop_rows(self) -> list[LoopRow]:
         return [] if self.topomap is None else make_loop_rows(self.topomap, self._tiers)
+
+    def prepared(self, name: str, fallback: Callable):
+        """What preparer ``name`` computed for the current map, else ``fallback(topomap)`` now."""
+        if name in self._extras:
+            return self._extras[name]
+        return fallback(self.topomap)
 
     def similarity(self) -> Optional[np.ndarray]:
         """Cosine similarity between every pair of nodes (computed here when not ready yet).
