@@ -8,8 +8,10 @@ How pairs are counted (following the paper):
 * Same place: metric distance between the two node positions <= ``dist_th`` (a nanometre
   of slack, so that a pair exactly ``dist_th`` apart is not lost to rounding).
 * Temporal neighbours: j - i <= ``neighbor_node_num`` (the map's parameter by default).
-* Detected: the pair is joined by a loop arc whose status is not "rejected"
-  (auto, confirmed and manual arcs all count).
+* Detected: the pair is joined by a loop arc whose status is not "rejected" nor an
+  undecided "candidate" (auto, confirmed and manual arcs count: what the exported map
+  holds); ``include_candidates=True`` counts candidates too (what a person reviewing the
+  queue would be shown).
 * TP: detected, same place, not temporal neighbours.
 * FP: detected, and different places OR temporal neighbours (a loop between
   temporal neighbours breaks the topology, so the paper counts it as FP even when
@@ -161,7 +163,7 @@ def _events(pi: np.ndarray, pj: np.ndarray, m: int) -> np.ndarray:
 
 
 def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1.0,
-             neighbor_node_num: Optional[int] = None) -> Evaluation:
+             neighbor_node_num: Optional[int] = None, include_candidates: bool = False) -> Evaluation:
     """Count TP/FP/TN/FN of the map's loop arcs against ground truth (see module doc)."""
     if dist_th < 0:
         raise InputError(f"distance threshold must be >= 0, got {dist_th}")
@@ -183,7 +185,7 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
             continue  # not a pair we count (a path arc)
         same = _within((x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2, dist_th)
         positive = bool(same) and j - i > nn
-        if d.get("status") == "rejected":
+        if d.get("status") == "rejected" or (d.get("status") == "candidate" and not include_candidates):
             loop_truth[(u, v)] = "FN" if positive else "TN"
         elif positive:
             loop_truth[(u, v)] = "TP"

@@ -9,8 +9,17 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
 * node ``n<k>``: ``index`` int, ``frame`` int, ``stamp`` float, ``shift`` int,
   ``label`` str, ``x``/``y`` float only when positions are known.
 * edge: ``kind`` "sequential" | "loop"; ``similarity`` float; ``status``
-  "auto" | "confirmed" | "rejected" | "manual"; ``yaw`` float degrees only where
+  "auto" | "candidate" | "confirmed" | "rejected" | "manual"; ``yaw`` float degrees only where
   estimated; ``window_count`` int on loop arcs (an addition to the contract).
+* added with the two tiers of loop detection: ``status`` "candidate" (found, not accepted
+  automatically, waiting for a person; left out of the exported corrected map unless asked),
+  ``tier`` str on detected loop arcs (what detection said, "auto" or "candidate": a reset
+  decision goes back to it), and the evidence behind a detected loop where known:
+  ``score`` float (calibrated descriptor score, standard deviations above the recording's own
+  background), ``support`` float (the same along the matched stretch), ``direction`` int
+  (+1 same way, -1 reverse), ``matches`` and ``inliers`` int (local features matched and
+  consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``confidence``
+  float (the ranking of the review queue).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -34,14 +43,18 @@ from .errors import InputError
 from .loops import LoopCandidate
 from .params import MapParams
 
-STATUSES = ("auto", "confirmed", "rejected", "manual")
-SETTABLE_STATUSES = ("auto", "confirmed", "rejected")
+STATUSES = ("auto", "candidate", "confirmed", "rejected", "manual")
+SETTABLE_STATUSES = ("auto", "candidate", "confirmed", "rejected")
+TIERS = ("auto", "candidate")   # what detection says of a loop before a person decides
 
 # Attributes whose type is fixed by the contract; values are cast on the way in and out.
 _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label": str,
                "x": float, "y": float}
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
-               "window_count": int}
+               "window_count": int, "tier": str, "score": float, "support": float,
+               "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
+               "confidence": float}
+EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "confidence")
 _GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
                 "node_sim_th": float, "loop_sim_th": float, "window_size": int,
                 "count_th": int, "neighbor_node_num": int, "interval": float, "long_runs": int}
@@ -96,10 +109,14 @@ class TopoMap:
         for lc in loops:
             if not (0 <= lc.a < m and 0 <= lc.b < m) or abs(lc.b - lc.a) < 2:
                 continue  # out of range, or already a path arc
-            attrs = dict(kind="loop", similarity=float(lc.similarity), status="auto",
+            tier = lc.status if lc.status in TIERS else "auto"
+            attrs = dict(kind="loop", similarity=float(lc.similarity), status=tier, tier=tier,
                          window_count=int(lc.window_count))
             if lc.yaw is not None:
                 attrs["yaw"] = float(lc.yaw)
+            for k, v in (lc.evidence or {}).items():
+                if k in EVIDENCE_KEYS and v is not None and np.isfinite(v):
+                    attrs[k] = _EDGE_TYPES[k](v)
             g.add_edge(f"n{lc.a}", f"n{lc.b}", **attrs)
 
         dmeta = descs.meta or {}
@@ -175,6 +192,10 @@ class TopoMap:
             raise InputError(f"the loop {u}-{v} was added by hand; remove it instead")
         attrs["status"] = status
 
+    def reset_status(self, u: str, v: str) -> None:
+        """Undo a person's decision: the loop goes back to the tier detection gave it."""
+        self.set_status(u, v, self._loop_attrs(u, v).get("tier", "auto"))
+
     def add_manual_loop(self, u: str, v: str, yaw: Optional[float] = None,
                         similarity: Optional[float] = None) -> None:
         self._check_node(u)
@@ -230,7 +251,7 @@ class TopoMap:
             if d["status"] == "manual":
                 manual.append({"frames": [frame[u], frame[v]],
                                "yaw": float(d["yaw"]) if "yaw" in d else None})
-            elif d["status"] != "auto":
+            elif d["status"] != d.get("tier", "auto"):
                 loops.append({"frames": [frame[u], frame[v]], "status": d["status"]})
         labels = [{"frame": frame[n], "label": self.graph.nodes[n]["label"]}
                   for n in self._ordered() if self.graph.nodes[n].get("label")]
@@ -299,8 +320,11 @@ class TopoMap:
         out.unapplied = _copy.deepcopy(self.unapplied)
         return out
 
-    def corrected(self, keep_rejected: bool = False) -> nx.Graph:
-        """The graph for export, attributes cast to their contract types."""
+    def corrected(self, keep_rejected: bool = False, keep_candidates: bool = False) -> nx.Graph:
+        """The graph for export, attributes cast to their contract types.
+
+        Rejected loops and undecided candidates are left out unless asked for: the
+        corrected map holds what was accepted (automatically, confirmed or added by hand)."""
         g = nx.Graph()
         g.graph.update(_clean_meta(self.graph.graph))
         for n in self._ordered():
@@ -309,14 +333,17 @@ class TopoMap:
         for u, v, d in self.graph.edges(data=True):
             if d.get("status") == "rejected" and not keep_rejected:
                 continue
+            if d.get("status") == "candidate" and not keep_candidates:
+                continue
             g.add_edge(u, v, **{k: _plain(val, _EDGE_TYPES.get(k)) for k, val in d.items()
                                 if val is not None})
         return g
 
-    def write_graphml(self, path: str | Path, keep_rejected: bool = False) -> None:
+    def write_graphml(self, path: str | Path, keep_rejected: bool = False,
+                      keep_candidates: bool = False) -> None:
         """Write the corrected map; atomic (a temporary file replaced into place)."""
         path = Path(path)
-        g = self.corrected(keep_rejected)
+        g = self.corrected(keep_rejected, keep_candidates)
         fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
         os.close(fd)
         try:

@@ -25,7 +25,7 @@ argmax is taken only inside candidate windows.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -45,6 +45,8 @@ class LoopCandidate:
     window_count: int             # "ours": largest candidate-window count; 0 otherwise
     yaw: Optional[float] = None   # relative heading in degrees, when estimated
     score: Optional[float] = None  # any later verification score
+    status: str = "auto"          # tier: "auto" (accepted) or "candidate" (for a person to review)
+    evidence: dict = field(default_factory=dict)  # named numbers behind it (graph.EVIDENCE_KEYS)
 
 
 def similarity_matrix(node_vectors: np.ndarray) -> np.ndarray:

@@ -56,7 +56,7 @@ def test_build_nodes_edges_and_meta():
     assert g.edges["n0", "n1"]["similarity"] == pytest.approx(float(v[0] @ v[2]), abs=1e-6)
     loops = tm.loops()
     assert [(u, v) for u, v, _ in loops] == [("n2", "n15"), ("n3", "n16"), ("n5", "n12")]
-    assert loops[0][2] == {"kind": "loop", "similarity": 0.71, "status": "auto",
+    assert loops[0][2] == {"kind": "loop", "similarity": 0.71, "status": "auto", "tier": "auto",
                            "window_count": 3, "yaw": 90.0}
     assert "yaw" not in loops[1][2]
     assert tm.meta["generator"].startswith("panotopo ")
