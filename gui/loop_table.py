@@ -24,12 +24,12 @@ from .style import STATUS_COLORS
 
 COLUMNS = ("#", "Status", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
 COLUMN_TIPS = (
-    "Rank by evidence: calibrated score (else similarity), then geometric inliers",
+    "Rank by evidence: the engine's confidence (else calibrated score, else similarity), then inliers",
     "candidate = found, waiting for you; auto = accepted automatically; confirmed / rejected by you; "
     "manual = added by you",
     "Query: the earlier node of the pair (source frame in the tooltip)",
     "Match: the later node of the pair",
-    "Calibrated descriptor score, where the method gives one",
+    "Calibrated descriptor score (standard deviations above the recording's background), where known",
     "Geometric inliers (and their ratio in the tooltip), where verified",
     "Similarity: cosine of the two node descriptors",
     "Relative heading between the two panoramas, in degrees (~: estimated from the images)",
@@ -168,8 +168,14 @@ class LoopTableModel(QAbstractTableModel):
         if r.inliers is not None:
             ratio = f" ({100 * r.inlier_ratio:.0f} %)" if r.inlier_ratio is not None else ""
             parts.append(f"{r.inliers} inliers{ratio}")
+        if r.matches is not None:
+            parts.append(f"{r.matches} feature matches")
         if r.support is not None:
             parts.append(f"sequence support {r.support:.2f}")
+        if r.direction is not None:
+            parts.append("travelled the same way" if r.direction > 0 else "travelled the other way")
+        if r.confidence is not None:
+            parts.append(f"confidence {r.confidence:.3f} (the rank)")
         if r.window_count:
             parts.append(f"window count {r.window_count}")
         return "\n".join(parts)

@@ -230,3 +230,13 @@ def test_the_readme_lists_exactly_the_shortcut_table():
             break
         listed |= {part.strip("` ") for part in line.split("|")[2].split(" or ")}
     assert listed == {k for s in SHORTCUTS for k in s.keys}
+
+
+def test_the_engine_tier_and_confidence_drive_reset_and_rank():
+    """A map whose decisions were made elsewhere (status confirmed, tier candidate): reset
+    goes back to the engine's tier; the engine's confidence ranks before the raw score."""
+    doc, queue = open_doc([dict(a=0, b=100, status="confirmed", tier="candidate", score=9.0, confidence=0.2),
+                           dict(a=1, b=200, status="candidate", tier="candidate", score=3.0, confidence=0.9)])
+    assert queue.keys() == [(10, 2000), (0, 1000)]
+    queue.decide_keys([(0, 1000)], "auto")               # "reset"
+    assert statuses(doc)[(0, 1000)] == "candidate"

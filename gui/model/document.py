@@ -35,7 +35,6 @@ from .loop_key import LoopKey, frames_key  # noqa: F401  (re-exported)
 STATUSES = ("candidate", "auto", "confirmed", "rejected", "manual")
 UNDECIDED = ("candidate", "auto")     # not decided by a person yet: what the review queue walks
 DECIDED = ("confirmed", "rejected")   # a person's verdict on a detected loop
-EVIDENCE = ("score", "inliers", "inlier_ratio", "support")
 
 
 @dataclass
@@ -52,10 +51,14 @@ class LoopRow:
     yaw: Optional[float]
     status: str
     tier: str = "auto"                     # what detection made of it: "candidate", "auto" or "manual"
-    score: Optional[float] = None          # calibrated descriptor score
-    inliers: Optional[int] = None          # geometric inliers
+    # The evidence behind a detected loop, where the engine gives it (engine.graph.EVIDENCE_KEYS).
+    score: Optional[float] = None          # calibrated descriptor score (sigmas above the background)
+    inliers: Optional[int] = None          # local features consistent with one two-view model
     inlier_ratio: Optional[float] = None
-    support: Optional[float] = None        # sequence support
+    support: Optional[float] = None        # the score along the matched stretch (sequence support)
+    matches: Optional[int] = None
+    direction: Optional[int] = None        # +1 same way, -1 reverse
+    confidence: Optional[float] = None     # the engine's ranking for the review queue
 
     @property
     def undecided(self) -> bool:
@@ -63,9 +66,12 @@ class LoopRow:
 
     @property
     def evidence(self) -> float:
-        """The number the queue ranks by: the calibrated score, else the cosine similarity."""
-        value = self.score if self.score is not None else self.similarity
-        return -math.inf if value is None or math.isnan(value) else float(value)
+        """The number the queue ranks by: the engine's confidence, else the calibrated score,
+        else the cosine similarity (maps made before the tiers, manual loops)."""
+        for value in (self.confidence, self.score, self.similarity):
+            if value is not None and not math.isnan(value):
+                return float(value)
+        return -math.inf
 
 
 @dataclass
@@ -96,7 +102,8 @@ def prepare_map(topomap, decisions: Optional[dict] = None, poses=None,
     g = topomap.graph
     node_of_frame = {int(d["frame"]): n for n, d in g.nodes(data=True)}
     frames = np.asarray(topomap.frames(), np.int64)
-    tiers = {_key(g, u, v): str(attrs.get("status", "auto")) for u, v, attrs in topomap.loops()}
+    # Before the decisions overwrite the statuses; engine maps since the tiers also carry "tier".
+    tiers = {_key(g, u, v): str(attrs.get("tier", attrs.get("status", "auto"))) for u, v, attrs in topomap.loops()}
     if decisions:
         topomap.apply_decisions(decisions)
     if poses is not None:
@@ -117,7 +124,7 @@ def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
             u, v, iu, iv = v, u, iv, iu
         key = _key(g, u, v)
         status = str(attrs.get("status", "auto"))
-        inliers = _number(attrs.get("inliers"))
+        inliers, matches, direction = (_number(attrs.get(k)) for k in ("inliers", "matches", "direction"))
         rows.append(LoopRow(
             key=key, u=u, v=v, index_u=iu, index_v=iv,
             similarity=float(attrs.get("similarity", float("nan"))),
@@ -129,6 +136,9 @@ def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
             inliers=None if inliers is None else int(inliers),
             inlier_ratio=_number(attrs.get("inlier_ratio")),
             support=_number(attrs.get("support")),
+            matches=None if matches is None else int(matches),
+            direction=None if direction is None else int(direction),
+            confidence=_number(attrs.get("confidence")),
         ))
     rows.sort(key=lambda r: (r.index_u, r.index_v))
     return rows
@@ -411,19 +421,7 @@ class MapDocument:
         self.set_loop_statuses({tuple(key): status})
 
     def _set_status(self, key: LoopKey, status: str) -> None:
-        from engine.errors import InputError
-        from engine.graph import SETTABLE_STATUSES
-
-        u, v = self._require(key)
-        if status in SETTABLE_STATUSES:
-            self.topomap.set_status(u, v, status)
-            return
-        if status not in STATUSES or status == "manual":
-            raise InputError(f"cannot set a loop to {status!r}")
-        attrs = self.topomap.graph.edges[u, v]  # a tier the engine does not set by hand ("candidate")
-        if attrs.get("status") == "manual":
-            raise InputError(f"the loop {u}-{v} was added by hand; remove it instead")
-        attrs["status"] = status
+        self.topomap.set_status(*self._require(key), status)
 
     def add_manual_loop(self, key: LoopKey, yaw: Optional[float] = None,
                         similarity: Optional[float] = None, status: str = "manual") -> None:

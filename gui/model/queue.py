@@ -2,8 +2,8 @@
 
 Candidates (found, not accepted) and auto loops (accepted automatically) are both
 *undecided* until a person confirms or rejects them. The queue ranks them by evidence
-(the calibrated ``score`` where the engine gives one, else the cosine similarity;
-then inliers), filters and counts them by status and by kind (the tier detection gave
+(the engine's ``confidence`` where it gives one, else the calibrated ``score``, else
+the cosine similarity; then inliers), filters and counts them by status and by kind (the tier detection gave
 them: candidate, auto, manual), and applies decisions, alone or in bulk, each action
 one undo step.
 
@@ -27,7 +27,7 @@ KINDS = ("candidate", "auto", "manual")
 
 
 def rank_key(row: LoopRow) -> tuple:
-    """Best evidence first: score (or similarity), then geometric inliers, then node order."""
+    """Best evidence first: confidence (else score, else similarity), then geometric inliers, then node order."""
     inliers = -1 if row.inliers is None else row.inliers
     return (-row.evidence, -inliers, row.index_u, row.index_v)
 
@@ -136,8 +136,7 @@ class ReviewQueue:
             return 0
         old = {r.key: r.status for r in rows}
         new = {r.key: "rejected" for r in rows}
-        score = "score" if any(r.score is not None for r in rows) else "similarity"
-        self.doc.push(SetStatuses(old, new, f"Reject {len(rows)} loops with {score} below {threshold:.3f}"))
+        self.doc.push(SetStatuses(old, new, f"Reject {len(rows)} loops ranked below {threshold:.3f}"))
         return len(rows)
 
     def evidence_of(self, key: LoopKey) -> float:
