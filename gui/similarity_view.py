@@ -68,10 +68,10 @@ class SimilarityView(QWidget):
             for item in self.markers.values():
                 item.setData([], [])
             return
-        lo = float(np.percentile(sim, 2)) if sim.size else 0.0
-        self.image.setImage(sim, autoLevels=False)
-        self.colorbar.setLevels((max(min(lo, 0.99), -1.0), 1.0))
+        preview, lo = self.doc.similarity_preview()  # block maxima and floor, made off the UI thread
         n = sim.shape[0]
+        self.image.setImage(preview, autoLevels=False, rect=(0, 0, n, n))
+        self.colorbar.setLevels((max(min(lo, 0.99), -1.0), 1.0))
         self.plot.setRange(xRange=(0, n), yRange=(0, n), padding=0.02)
         self.plot.setTitle(f"Similarity between the {n} nodes", color="#444", size="9pt")
         self.redraw_loops()

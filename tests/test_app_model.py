@@ -10,6 +10,7 @@ import random
 from pathlib import Path
 
 import networkx as nx
+import numpy as np
 import pytest
 
 from engine.graph import TopoMap
@@ -240,3 +241,16 @@ def test_the_engine_tier_and_confidence_drive_reset_and_rank():
     assert queue.keys() == [(10, 2000), (0, 1000)]
     queue.decide_keys([(0, 1000)], "auto")               # "reset"
     assert statuses(doc)[(0, 1000)] == "candidate"
+
+
+def test_similarity_preview_keeps_a_thin_revisit_line_visible():
+    from gui.model.similarity import floor_of, preview_of
+
+    m = 5000
+    matrix = np.zeros((m, m), np.float32)
+    matrix[np.arange(1000), np.arange(3000, 4000)] = 0.9    # one revisit: a one-cell-wide diagonal
+    preview = preview_of(matrix, side=512)
+    assert max(preview.shape) <= 512
+    assert preview.max() == np.float32(0.9)               # block maxima: the line survives
+    assert (preview > 0.5).sum() >= 512 // 5 - 2           # ... along its whole length
+    assert floor_of(matrix) == 0.0

@@ -27,8 +27,10 @@ import numpy as np
 from engine.params import MapParams
 
 from . import journal as journal_records
+from . import similarity
 from .history import Command, History
 from .loop_key import LoopKey, frames_key  # noqa: F401  (re-exported)
+from .similarity import Similarity
 
 # Loop tiers and decisions. "candidate": found but not accepted, waiting for a person;
 # "auto": accepted automatically; the rest are a person's decisions.
@@ -174,7 +176,7 @@ class MapDocument:
         self._node_of_frame: dict[int, str] = {}
         self._frames = np.zeros(0, np.int64)
         self.decision_version = 0               # +1 on every decision: a map prepared meanwhile is stale
-        self._similarity: Optional[np.ndarray] = None
+        self._similarity: Optional[Similarity] = None
         self._rows: Optional[list[LoopRow]] = None
         self._tiers: dict[LoopKey, str] = {}    # the status detection gave each loop (for "reset")
         # Relative yaws estimated from the images for pairs whose loop has none (by key).
@@ -352,32 +354,36 @@ class MapDocument:
             if job is None:
                 return None
             self._similarity = job()
-        return self._similarity
+        return self._similarity.matrix
+
+    def similarity_preview(self) -> Optional[tuple[np.ndarray, float]]:
+        """(picture-sized block maxima, colour floor) of the matrix, once it is computed."""
+        s = self._similarity
+        return None if s is None else (s.preview, s.floor)
 
     def similarity_ready(self) -> bool:
         return self._similarity is not None
 
-    def similarity_job(self) -> Optional[Callable[[], np.ndarray]]:
-        """A function computing the similarity matrix of the current map (safe to run in a thread)."""
+    def similarity_job(self) -> Optional[Callable[[], Similarity]]:
+        """A function computing the similarity matrix of the current map and its preview
+        (safe to run in a thread)."""
         if self.topomap is None or self.descs is None:
             return None
-        from engine.loops import similarity_matrix
-
         vectors = self.descs.vectors[np.asarray(self.topomap.node_rows, np.int64)]
-        return lambda: similarity_matrix(vectors)
+        return lambda: similarity.compute(vectors)
 
-    def set_similarity(self, topomap, matrix: np.ndarray) -> bool:
+    def set_similarity(self, topomap, result: Similarity) -> bool:
         """Store a matrix computed in the background, unless the map changed meanwhile."""
         if topomap is not self.topomap:
             return False
-        self._similarity = matrix
+        self._similarity = result
         self._notify("similarityReady")
         return True
 
     def pair_similarity(self, k_a: int, k_b: int) -> float:
         """Cosine of two nodes (from the matrix when it is ready, else from the two vectors)."""
         if self._similarity is not None:
-            return float(self._similarity[k_a, k_b])
+            return float(self._similarity.matrix[k_a, k_b])
         if self.topomap is None or self.descs is None:
             return float("nan")
         rows = np.asarray(self.topomap.node_rows, np.int64)
