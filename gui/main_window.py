@@ -407,6 +407,9 @@ class MainWindow(QMainWindow):
                                             interval=self.params_panel.interval_value(), topic=topic,
                                             shift=params.uses_shift, options=dict(self.describe_options))
 
+        if not self._attach_journal(p):
+            return False
+
         # A new document: nothing of the previous one survives.
         self.runner.stop()
         self.remapper.stop()
@@ -429,11 +432,66 @@ class MainWindow(QMainWindow):
         self._load_initial_poses(p, session, pose_topic)
         if session is None and not descriptors_file:
             self._offer_saved_work(p)
+        self._recover_journal()
         self._update_title()
         self.statusBar().showMessage(f"Opened {p.name}", 5000)
         if run:
             self.start_run()
         return True
+
+    # ==== the decision journal (engine.journal): every decision on disk as it is made ===========
+    def _attach_journal(self, p: Path) -> bool:
+        """Open the journal of recording ``p`` for this window; False when another panotopo has it.
+
+        The document appends every decision record to it (``MapDocument.record_decision``).
+        """
+        try:
+            from engine.journal import Journal, JournalLocked, journal_session_path
+        except ImportError:  # an engine without the journal: decisions are kept by autosave only
+            return True
+        old = self.doc.journal
+        if old is not None and old.session_path == journal_session_path(p):
+            old.close()  # reopening the same recording: release our own lock first
+            self.doc.journal = old = None
+        try:
+            journal = Journal.open(p)
+        except JournalLocked as exc:
+            self.error(f"{p.name} is open in another panotopo window ({exc.holder}): close it there first")
+            return False
+        except OSError as exc:
+            journal = None
+            self.warn(f"Decisions on {p.name} cannot be journaled ({exc.strerror or exc}); "
+                      "save often (autosave still runs)")
+        if old is not None:
+            old.close()
+        self.doc.journal = journal
+        if journal is not None and journal.fallback:
+            self.statusBar().showMessage(f"The recording's folder is read-only: decisions are journaled "
+                                         f"in {journal.path.parent}", 10000)
+        return True
+
+    def _recover_journal(self) -> None:
+        """Decisions made after the last save (the app was killed): replayed over the saved ones."""
+        journal = self.doc.journal
+        records = journal.replay() if journal is not None else []
+        if not records:
+            return
+        from .model import journal as journal_records
+
+        self._pending_decisions = journal_records.replay(records, self._pending_decisions or {})
+        self._extra_dirty = True
+        self.statusBar().showMessage(f"{len(records)} decisions made after the last save were recovered "
+                                     "(not saved yet)", 10000)
+
+    def _compact_journal(self, upto: Optional[int] = None) -> None:
+        """The session on disk now holds the journal's records (or the user discarded them)."""
+        journal = self.doc.journal
+        if journal is None:
+            return
+        try:
+            journal.compact(upto)
+        except OSError as exc:
+            self.statusBar().showMessage(f"Journal not compacted: {exc}", 8000)
 
     def _open_session(self, path: Path, run: bool = True) -> bool:
         session = Session.load(path)
@@ -932,6 +990,7 @@ class MainWindow(QMainWindow):
         if self.doc.input_path is None:
             return False
         target = Path(path) if path else (self.doc.session_path or session_path_for(self.doc.input_path))
+        journaled = self.doc.journal.last_seq if self.doc.journal is not None else None
         try:
             self.current_session().save(target)
         except OSError as exc:
@@ -940,6 +999,8 @@ class MainWindow(QMainWindow):
         self.doc.session_path = target
         self.undo_stack.setClean()
         self._extra_dirty = False
+        if target == session_path_for(self.doc.input_path):  # the session the journal replays over
+            self._compact_journal(journaled)
         autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
         self._update_title()
         self._add_recent(str(target))
@@ -987,6 +1048,7 @@ class MainWindow(QMainWindow):
             return self.save_session()
         if answer == QMessageBox.Discard:
             autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
+            self._compact_journal()  # discarded: they must not come back on the next open
             self.undo_stack.setClean()
             self._extra_dirty = False
             return True
@@ -1212,6 +1274,9 @@ class MainWindow(QMainWindow):
         self.runner.stop()
         self.remapper.stop()
         self.similarity_worker.stop()
+        if self.doc.journal is not None:
+            self.doc.journal.close()  # the records stay until a save compacts them
+            self.doc.journal = None
         app = QApplication.instance()
         if app is not None and self._watching_focus:
             self._watching_focus = False
