@@ -109,6 +109,9 @@ def no_sidecars_left(recording):
     for p in (recording["video"], recording["ros1"]):
         session_path_for(p).unlink(missing_ok=True)
         autosave_path_for(p).unlink(missing_ok=True)
+        for suffix in (".journal", ".journal.lock"):  # the decision journal (engine.journal) too
+            session = session_path_for(p)
+            session.with_name(session.name + suffix).unlink(missing_ok=True)
 
 
 def test_whole_session_open_run_curate_undo_save_reopen_export(qtbot, make_window, recording, tmp_path, dialogs):
