@@ -19,7 +19,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QHBoxLayout, QHeade
                                QTableView, QVBoxLayout, QWidget)
 
 from .document import Document, LoopKey, LoopRow
-from .model.queue import KINDS, rank_key
+from .model.queue import KINDS, ReviewQueue, rank_key
 from .style import STATUS_COLORS
 
 COLUMNS = ("#", "Status", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
@@ -384,14 +384,10 @@ class LoopTable(QWidget):
             self.select_keys(keys)  # those still shown stay selected (hidden ones are not forced back)
 
     def _update_counts(self) -> None:
-        status, kind = {}, {}
-        for r in self.model.rows:
-            status[r.status] = status.get(r.status, 0) + 1
-            kind[r.tier] = kind.get(r.tier, 0) + 1
-        order = ("candidate", "auto", "confirmed", "rejected", "manual")
-        parts = [f"<span style='color:{status_color(s)}'>■</span>&nbsp;{status.get(s, 0)}&nbsp;{s}"
-                 for s in order if status.get(s) or s in ("auto", "confirmed", "rejected")]
-        undecided = status.get("candidate", 0) + status.get("auto", 0)
-        found = ", ".join(f"{kind[k]} {k}" for k in KINDS if kind.get(k))
-        self.counts.setText(" &nbsp; ".join(parts) + f" &nbsp;·&nbsp; <b>{undecided} undecided</b>"
+        counts = ReviewQueue(self.doc).counts()
+        status, kind = counts["status"], counts["kind"]
+        parts = [f"<span style='color:{status_color(s)}'>■</span>&nbsp;{n}&nbsp;{s}"
+                 for s, n in status.items() if n or s in ("auto", "confirmed", "rejected")]
+        found = ", ".join(f"{n} {k}" for k, n in kind.items() if n)
+        self.counts.setText(" &nbsp; ".join(parts) + f" &nbsp;·&nbsp; <b>{counts['undecided']['undecided']} undecided</b>"
                             + (f" &nbsp;·&nbsp; found as: {found}" if found else ""))
