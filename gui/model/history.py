@@ -60,20 +60,18 @@ class History:
         self._changed()
 
     def undo(self) -> bool:
-        if not self._done:
-            return False
-        command = self._done.pop()
-        command.undo(self.model)
-        self._undone.append(command)
-        self._changed()
-        return True
+        return self._move(self._done, self._undone, "undo")
 
     def redo(self) -> bool:
-        if not self._undone:
+        return self._move(self._undone, self._done, "redo")
+
+    def _move(self, source: list, target: list, how: str) -> bool:
+        """Take the top command of ``source``, run its ``how``, put it on ``target``."""
+        if not source:
             return False
-        command = self._undone.pop()
-        command.redo(self.model)
-        self._done.append(command)
+        command = source.pop()
+        getattr(command, how)(self.model)
+        target.append(command)
         self._changed()
         return True
 
