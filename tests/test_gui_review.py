@@ -229,3 +229,35 @@ def test_opening_another_recording_clears_the_pair_and_the_graph_selection(qtbot
     assert w.open_path(str(video), run=False)
     assert w.pair_view.key is None and w.graph_view.selected_key is None
     assert "n" not in w.pair_view.query_title.text.replace("Query", "")
+
+
+def test_menus_and_help_come_from_the_key_table_with_the_settings_overrides(qtbot, tmp_path, monkeypatch):
+    import json
+
+    from PySide6.QtGui import QKeySequence
+
+    from gui.model.keys import SHORTCUTS
+    from gui.shortcuts_dialog import ShortcutsDialog
+
+    config = tmp_path / "config"
+    (config / "panotopo").mkdir(parents=True)
+    (config / "panotopo" / "settings.json").write_text(json.dumps(
+        {"shortcuts": {"confirm": ["Return"], "next_undecided": "X", "no_such_action": "Q"}}))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(config))
+    w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), cache_root=str(tmp_path))
+    qtbot.addWidget(w)
+    try:
+        for entry in SHORTCUTS:
+            if entry.fixed:
+                continue
+            action = w.action_of_key[entry.action]
+            expected = {"confirm": ["Return"], "next_undecided": ["X"]}.get(entry.action, list(entry.keys))
+            assert action.shortcuts() == [QKeySequence(k) for k in expected], entry.action
+        assert "no_such_action" in w.statusBar().currentMessage()
+        dialog = ShortcutsDialog(w.shortcuts, w)
+        table = dialog.layout().itemAt(0).widget()
+        shown = {table.item(r, 2).text(): table.item(r, 1).text() for r in range(table.rowCount())}
+        assert shown["Confirm the selected loops (same place)"] == "Return"
+        assert len(shown) == len(SHORTCUTS)
+    finally:
+        w.shutdown()
