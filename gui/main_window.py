@@ -706,6 +706,7 @@ class MainWindow(QMainWindow):
         self._update_actions()
         if self.is_modified():
             self.autosave()
+        _settle_garbage_collector()
         self.mapReady.emit()
 
     def _on_run_failed(self, message: str) -> None:
@@ -1317,6 +1318,21 @@ def _user_settings() -> dict:
         print(f"panotopo: {path}: ignored ({exc.__class__.__name__})", file=sys.stderr)
         return {}
     return data if isinstance(data, dict) else {}
+
+
+def _settle_garbage_collector() -> None:
+    """Collect once, then move everything alive to the collector's permanent generation.
+
+    After a run the process holds millions of long-lived objects (torch, Qt, the engine's
+    modules, the descriptors' metadata). Each full collection walked all of them: 200 ms
+    with the GIL held, a stall of the window, every few re-maps of a 20k-node map
+    (benchmarks/bench_ui_stall.py). Frozen, they are skipped; what is made later (the next
+    maps) is collected as usual. One full collection per run is the price.
+    """
+    import gc
+
+    gc.collect()
+    gc.freeze()
 
 
 def _app_icon() -> QIcon:
