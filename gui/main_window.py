@@ -445,6 +445,8 @@ class MainWindow(QMainWindow):
 
         The document appends every decision record to it (``MapDocument.record_decision``).
         """
+        if not self.interactive:  # a screenshot or scripted run neither takes nor writes the user's journal
+            return True
         try:
             from engine.journal import Journal, JournalLocked, journal_session_path
         except ImportError:  # an engine without the journal: decisions are kept by autosave only
