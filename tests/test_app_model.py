@@ -254,3 +254,17 @@ def test_similarity_preview_keeps_a_thin_revisit_line_visible():
     assert preview.max() == np.float32(0.9)               # block maxima: the line survives
     assert (preview > 0.5).sum() >= 512 // 5 - 2           # ... along its whole length
     assert floor_of(matrix) == 0.0
+
+
+def test_undo_after_a_remap_that_dropped_the_loop_keeps_the_decision_carried():
+    loops = [dict(a=0, b=100, status="candidate"), dict(a=1, b=200, status="candidate")]
+    doc, queue = open_doc(loops)
+    queue.decide_keys([(0, 1000)], "rejected")
+    doc.replace_map(make_map(loops[1:]), decisions=doc.decisions())   # new parameters: that loop is gone
+    assert {"frames": [0, 1000], "status": "rejected"} in doc.decisions()["loops"]
+    doc.history.undo()                                   # no error; the decision is taken back
+    assert all(d["frames"] != [0, 1000] for d in doc.decisions()["loops"])
+    doc.history.redo()
+    assert {"frames": [0, 1000], "status": "rejected"} in doc.decisions()["loops"]
+    doc.replace_map(make_map(loops), decisions=doc.decisions())       # the loop is back, decided
+    assert statuses(doc)[(0, 1000)] == "rejected"
