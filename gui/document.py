@@ -24,6 +24,7 @@ class Document(QObject, MapDocument):
     sourceChanged = Signal()      # a new recording opened (or closed)
     estimatedYaw = Signal(object)  # LoopKey whose yaw was estimated from the images
     similarityReady = Signal()    # the similarity matrix of the current map is computed
+    journalFailed = Signal(str)   # a decision could not be written to the journal (message)
 
     def __init__(self, parent: Optional[QObject] = None) -> None:
         QObject.__init__(self, parent)

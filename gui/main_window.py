@@ -324,6 +324,7 @@ class MainWindow(QMainWindow):
         self.doc.mapReplaced.connect(self._update_actions)
         self.doc.loopsChanged.connect(self._update_actions)
         self.doc.mapReplaced.connect(self._request_similarity)
+        self.doc.journalFailed.connect(self.warn)
         self.tabs.currentChanged.connect(self._request_similarity)
         # Ctrl+Z in the place-name field: the app's undo once the name is applied (defect 7).
         self.node_panel.name.installEventFilter(self)

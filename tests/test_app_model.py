@@ -268,3 +268,18 @@ def test_undo_after_a_remap_that_dropped_the_loop_keeps_the_decision_carried():
     assert {"frames": [0, 1000], "status": "rejected"} in doc.decisions()["loops"]
     doc.replace_map(make_map(loops), decisions=doc.decisions())       # the loop is back, decided
     assert statuses(doc)[(0, 1000)] == "rejected"
+
+
+def test_a_journal_that_fails_to_write_keeps_the_decision_and_says_so():
+    doc, queue = open_doc([dict(a=0, b=100, status="candidate")])
+
+    class FullDisk:
+        def append(self, record):
+            raise OSError(28, "No space left on device")
+
+    told: list = []
+    doc.on("journalFailed", told.append)
+    doc.journal = FullDisk()
+    queue.decide_keys([(0, 1000)], "confirmed")
+    assert statuses(doc)[(0, 1000)] == "confirmed"
+    assert len(told) == 1 and "No space left" in told[0] and doc.journal is None

@@ -8,7 +8,7 @@ frames do not, and ``TopoMap.decisions()`` is keyed the same way.
 Changes are announced by name to listeners (``on(event, fn)``); the Qt ``Document``
 turns the same names into Qt signals. Events: ``mapReplaced``, ``loopsChanged``,
 ``labelsChanged``, ``posesChanged``, ``evaluationChanged``, ``sourceChanged``,
-``estimatedYaw`` (key), ``similarityReady``.
+``estimatedYaw`` (key), ``similarityReady``, ``journalFailed`` (message).
 
 Every decision (a status, a manual loop added or removed, a place name) passes
 through ``record_decision`` as one plain record (see ``gui.model.journal``), the
@@ -413,7 +413,12 @@ class MapDocument:
         """
         self.decision_version += 1
         if self.journal is not None:
-            self.journal.append(record)
+            try:
+                self.journal.append(record)
+            except OSError as exc:  # a full or vanished disk: the decision stands, the user is told
+                self.journal = None
+                self._notify("journalFailed", f"Decisions are no longer journaled ({exc.strerror or exc}): "
+                                              "save the session now")
 
     # -- edits (called by the commands only) ---------------------------------------
     def set_loop_statuses(self, changes: dict[LoopKey, str]) -> None:
