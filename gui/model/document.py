@@ -424,9 +424,20 @@ class MapDocument:
     def set_loop_statuses(self, changes: dict[LoopKey, str]) -> None:
         """Set many statuses with one notification (a bulk action)."""
         for key, status in changes.items():
-            self._set_status(key, status)
+            if self.loop_attrs(key) is None:
+                self._carry(key, status)  # an undo after a re-map dropped the loop
+            else:
+                self._set_status(key, status)
             self.record_decision(journal_records.status(key, status))
         self._after_loop_edit()
+
+    def _carry(self, key: LoopKey, status: str) -> None:
+        """A decision on a loop this map does not have: kept with the map's unapplied ones, so
+        it comes back when a later map has the loop again (``TopoMap.apply_decisions``)."""
+        unapplied = self.topomap.unapplied["loops"]
+        unapplied[:] = [d for d in unapplied if frames_key(d["frames"]) != tuple(key)]
+        if status not in UNDECIDED:
+            unapplied.append({"frames": [int(key[0]), int(key[1])], "status": status})
 
     def set_loop_status(self, key: LoopKey, status: str) -> None:
         self.set_loop_statuses({tuple(key): status})
