@@ -283,3 +283,18 @@ def test_a_journal_that_fails_to_write_keeps_the_decision_and_says_so():
     queue.decide_keys([(0, 1000)], "confirmed")
     assert statuses(doc)[(0, 1000)] == "confirmed"
     assert len(told) == 1 and "No space left" in told[0] and doc.journal is None
+
+
+def test_undo_of_a_manual_loop_and_a_name_after_the_nodes_moved():
+    doc, queue = open_doc([], nodes=60)
+    from gui.model.commands import AddManualLoop
+    doc.push(AddManualLoop((50, 400)))
+    doc.push(SetLabel(50, "", "door"))
+    moved = nx.relabel_nodes(make_map([], 60).graph, lambda n: n)   # same route, nodes 3 frames later
+    for n, d in moved.nodes(data=True):
+        d["frame"] += 3
+    doc.replace_map(TopoMap(moved, {}), decisions=doc.decisions())
+    assert [r.status for r in doc.loop_rows()] == ["manual"] and doc.label_of_frame(53) == "door"
+    doc.history.undo()
+    doc.history.undo()
+    assert doc.loop_rows() == [] and doc.label_of_frame(53) == ""

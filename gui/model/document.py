@@ -447,26 +447,39 @@ class MapDocument:
 
     def add_manual_loop(self, key: LoopKey, yaw: Optional[float] = None,
                         similarity: Optional[float] = None, status: str = "manual") -> None:
-        u, v = self._require(key)
+        u, v = self._nodes_near(key)
         self.topomap.add_manual_loop(u, v, yaw=yaw, similarity=similarity)  # None: from descriptors
+        key = self.key_of(u, v)
         if status != "manual":
             self._set_status(key, status)
         self.record_decision(journal_records.manual(key, yaw, status))
         self._after_loop_edit()
 
     def remove_loop(self, key: LoopKey) -> None:
-        self.topomap.remove_loop(*self._require(key))
+        self.topomap.remove_loop(*self._nodes_near(key))
         self.record_decision(journal_records.removed(key))
         self._after_loop_edit()
 
     def set_label(self, frame: int, label: str) -> None:
         node = self.node_of_frame(frame)
-        if node is None:
-            raise KeyError(f"no node at frame {frame}")
+        if node is None:  # an undo after a re-map moved the nodes: the nearest, as apply_decisions does
+            node = self.node_id(int(np.argmin(np.abs(self.node_frames() - int(frame)))))
         self.topomap.set_label(node, label)
         self.record_decision(journal_records.label(frame, label))
         self._rows = None
         self._notify("labelsChanged")
+
+    def _nodes_near(self, key: LoopKey) -> tuple[str, str]:
+        """The nodes at frames ``key``, else those nearest in frame (where ``TopoMap.apply_decisions``
+        put a manual loop after a re-map moved the nodes)."""
+        nodes = self.nodes_of(key) if self.topomap is not None else None
+        if nodes is not None:
+            return nodes
+        frames = self.node_frames()
+        if frames.size == 0:
+            raise KeyError(f"no nodes at frames {key}")
+        a, b = (int(np.argmin(np.abs(frames - int(f)))) for f in key)
+        return self.node_id(a), self.node_id(b)
 
     def _require(self, key: LoopKey) -> tuple[str, str]:
         nodes = self.nodes_of(key) if self.topomap is not None else None
