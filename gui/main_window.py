@@ -76,6 +76,7 @@ class MainWindow(QMainWindow):
         self.similarity_worker = LatestOnly(self)  # the similarity matrix, off the UI thread
         self.advance_after_decision = bool(self.defaults["ui"].get("advance_after_decision", True))
         self._pending_decisions: Optional[dict] = None
+        self._preparing_run: Optional[RunResult] = None  # a finished run whose map is being prepared
         self._pending_view: dict = {}
         self._extra_dirty = False     # changes outside the undo stack (poses loaded)
         self._defaults: dict = {}
@@ -415,6 +416,7 @@ class MainWindow(QMainWindow):
         self.runner.stop()
         self.remapper.stop()
         self.similarity_worker.stop()
+        self._preparing_run = None
         self.undo_stack.clear()
         self._extra_dirty = False
         self.doc.clear_map()
@@ -654,6 +656,7 @@ class MainWindow(QMainWindow):
 
         if self.runner.running:
             self.runner.stop()
+        self._preparing_run = None  # a new run supersedes the map being prepared
         self._show_progress(True)
         self._progress_stage = ""
         self._stage_started = time.monotonic()
@@ -687,16 +690,35 @@ class MainWindow(QMainWindow):
             self.progress_bar.setFormat(stage)
 
     def _on_run_finished(self, result: RunResult) -> None:
+        """The run's map is prepared off the UI thread too (decisions applied, rows, layout)."""
+        # Decisions survive a re-run: the current ones, or those of the session just opened.
+        pending, self._pending_decisions = self._pending_decisions, None
+        self._preparing_run = result
+        self.progress_bar.setRange(0, 0)
+        self.progress_bar.setFormat("preparing the map")
+        job = self.doc.remap_job(lambda: result.topomap, pending)
+        self.remapper.submit(job, lambda prepared: self._run_prepared(result, pending, prepared),
+                             lambda exc: self._run_prepare_failed(result, exc))
+
+    def _run_prepare_failed(self, result: RunResult, exc: BaseException) -> None:
+        if self._preparing_run is result:
+            self._preparing_run = None
+            self._on_run_failed(f"unexpected error: {exc.__class__.__name__}: {exc}")
+
+    def _run_prepared(self, result: RunResult, pending, prepared) -> None:
         from engine.pipeline import descriptor_defaults
 
+        if self._preparing_run is not result:
+            return  # another run or another recording came in meanwhile
+        if pending is None and not self.doc.is_current(prepared):  # decided on the old map meanwhile
+            self._on_run_finished(result)  # prepare again, with those decisions
+            return
+        self._preparing_run = None
         self._show_progress(False)
-        # Decisions survive a re-run: the current ones, or those of the session just opened.
-        decisions = self._pending_decisions if self._pending_decisions is not None else self.doc.decisions()
-        self._pending_decisions = None
         self.doc.describe_settings = result.job.settings
         self._defaults = descriptor_defaults(result.descs)
         self._set_known_shifts(result.descs)
-        self.doc.replace_map(result.topomap, result.descs, decisions)
+        self.doc.install(prepared, result.descs)
         if needs_remap(result.job.params, self.doc.params):
             # The user changed a map parameter while the run was going: honour it (off the UI thread).
             self._remap(self.doc.params)
@@ -705,7 +727,7 @@ class MainWindow(QMainWindow):
         self._restore_view()
         self.statusBar().showMessage(
             f"Map built in {result.seconds:.1f} s: {self.doc.node_count()} nodes, "
-            f"{len(self.doc.topomap.loops())} loop candidates", 10000)
+            f"{len(self.doc.loop_rows())} loop candidates", 10000)
         self._update_actions()
         if self.is_modified():
             self.autosave()
@@ -768,8 +790,8 @@ class MainWindow(QMainWindow):
         self.doc.params = new
         self.params_panel.set_params(new, self._defaults)
         descs = self.doc.descs
-        if descs is None:
-            return
+        if descs is None or self._preparing_run is not None:
+            return  # the run's map is on its way; it is rebuilt with ``new`` when it lands
         if new.uses_shift != bool(descs.meta.get("shift", True)):
             if str(self.doc.input_path).endswith(".npz"):
                 self.warn(f"Method '{new.method}' needs {'shifted' if new.uses_shift else 'unshifted'} "

@@ -208,8 +208,9 @@ class MapDocument:
         """Show a new map; ``decisions`` (from the old map, a session or a journal) are re-applied."""
         self.install(prepare_map(topomap, decisions, self.poses), descs)  # small maps, tests: here
 
-    def remap_job(self, build: Callable[[], object]) -> Callable[[], PreparedMap]:
-        """A function for a worker thread: ``build()`` a map and prepare it with today's decisions.
+    def remap_job(self, build: Callable[[], object], decisions: Optional[dict] = None) -> Callable[[], PreparedMap]:
+        """A function for a worker thread: ``build()`` a map and prepare it with today's decisions
+        (or with ``decisions``: a session or journal being opened).
 
         The decisions are read from the map shown now, in the worker; a decision made
         while it runs bumps ``decision_version`` and ``install`` then refuses the result
@@ -219,8 +220,8 @@ class MapDocument:
         preparers = dict(self.preparers)
 
         def job() -> PreparedMap:
-            decisions = old.decisions() if old is not None else {}
-            prepared = prepare_map(build(), decisions, poses, preparers)
+            carried = decisions if decisions is not None else (old.decisions() if old is not None else {})
+            prepared = prepare_map(build(), carried, poses, preparers)
             prepared.decision_version = version
             return prepared
 
