@@ -114,6 +114,10 @@ class Row:
     events_total: int
     extraction_fps: float
     people: int = 0
+    family: str = "synth"
+    candidates: int = 0              # undecided candidates in the map (two-tier methods)
+    false_candidates: int = 0        # of them, not the same place (or temporal neighbours)
+    events_with_candidates: int = 0  # revisit events found by an auto loop or a candidate
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -135,12 +139,20 @@ def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
         shift = method in SHIFTED_METHODS or method not in ("simple",)
         descs = described.by_shift[shift]
         topomap = build_map(descs, p)
-        ev = evaluate(topomap, described.poses, neighbor_node_num=eval_nn)
-        rows.append(Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
-                        ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
-                        ev.events_total, float(described.frames_per_second.get(shift, 0.0)),
-                        case.people))
+        rows.append(score_map(topomap, described.poses, case, method, eval_nn,
+                              float(described.frames_per_second.get(shift, 0.0))))
     return rows
+
+
+def score_map(topomap, poses: Poses, case, method: str, eval_nn: int = 5, fps: float = 0.0) -> Row:
+    """One results row: the exported map's metrics, plus what the candidate tier adds."""
+    ev = evaluate(topomap, poses, neighbor_node_num=eval_nn)
+    with_cand = evaluate(topomap, poses, neighbor_node_num=eval_nn, include_candidates=True)
+    cands = len(topomap.loops(("candidate",)))
+    return Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
+               ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
+               ev.events_total, fps, getattr(case, "people", 0), getattr(case, "family", "synth"),
+               cands, with_cand.fp - ev.fp, with_cand.events_found)
 
 
 PAPER_METHODS = ("simple", "shift-simple", "ours")
@@ -174,7 +186,9 @@ def evaluate_route(route: str, look: str, seed: int = 0, methods: Iterable[str] 
 def sum_rows(rows: list[Row], method: str) -> dict:
     """Totals over rows of one method (pair counts, events) with ratios recomputed."""
     sel = [r for r in rows if r.method == method]
-    tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total")}
+    tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total",
+                                                        "candidates", "false_candidates",
+                                                        "events_with_candidates")}
     tp, fp, fn = tot["tp"], tot["fp"], tot["fn"]
     tot["precision"] = tp / (tp + fp) if tp + fp else 0.0
     tot["recall"] = tp / (tp + fn) if tp + fn else 0.0
@@ -212,3 +226,52 @@ def markdown_table(rows: list[Row]) -> str:
 
 def rows_json(rows: list[Row]) -> str:
     return json.dumps([r.as_dict() for r in rows], indent=1)
+
+
+def random_walk_descriptors(n: int, d: int = 1024, seed: int = 0, revisit_share: float = 0.3,
+                            noise: float = 0.6) -> tuple[np.ndarray, np.ndarray]:
+    """(n, d) L2-normalised descriptors that look like a recording, and where they revisit.
+
+    A smooth walk on the unit sphere (a heading with momentum, consecutive cosine about
+    0.97, about 20 steps to forget a place) around a shared mean direction (so unrelated
+    places still have cosine about 0.3, as real descriptors do). About ``revisit_share``
+    of the rows are stretches (20 to 300 rows) of earlier rows driven again forward or in
+    reverse, each row a noisy copy (``noise`` 0.6: cosine about 0.9 to its original);
+    the walk then goes on from there. ``origin[i]`` is the earlier row that row i
+    revisits, -1 for new ground. For benchmarks and tests of retrieval at any n.
+    """
+    rng = np.random.default_rng(seed)
+    walk = np.empty((n, d), np.float32)
+    origin = np.full(n, -1, np.int64)
+    mean_dir = rng.standard_normal(d).astype(np.float32)
+    mean_dir /= np.linalg.norm(mean_dir)
+    x = rng.standard_normal(d).astype(np.float32)
+    x /= np.linalg.norm(x)
+    heading = rng.standard_normal(d).astype(np.float32) / np.sqrt(d)
+    i = 0
+    while i < n:
+        if i > 400 and rng.random() < revisit_share / (1 - revisit_share) * 100 / 160:
+            length = int(min(n - i, rng.integers(20, 300)))
+            sign = 1 if rng.random() < 0.5 else -1
+            start = int(rng.integers(0, i - length)) if i - length > 0 else 0
+            src = start + np.arange(length) if sign == 1 else start + length - 1 - np.arange(length)
+            src = np.clip(src, 0, i - 1)
+            noisy = walk[src] + noise * rng.standard_normal((length, d)).astype(np.float32) / np.sqrt(d)
+            walk[i:i + length] = noisy / np.linalg.norm(noisy, axis=1, keepdims=True)
+            origin[i:i + length] = src
+            x = walk[src[-1]].copy()
+            i += length
+        length = int(min(n - i, rng.integers(50, 150)))
+        g = rng.standard_normal((length, d)).astype(np.float32) / np.sqrt(d)
+        for t in range(length):
+            heading = 0.8 * heading + 0.6 * g[t]
+            heading /= np.linalg.norm(heading)
+            x = x + 0.25 * heading
+            x /= np.linalg.norm(x)
+            walk[i + t] = x
+        i += length
+    for r0 in range(0, n, 8192):   # in place, a block at a time: no second (n, d) copy
+        block = walk[r0:r0 + 8192]
+        block += 0.65 * mean_dir[None, :]
+        block /= np.linalg.norm(block, axis=1, keepdims=True)
+    return walk, origin

@@ -141,11 +141,13 @@ def loop_threshold(vectors: np.ndarray, exclude: int = 5, k: float = LOOP_Z) -> 
     m = v.shape[0]
     if m <= exclude + 1:
         return 0.9
-    rng = np.random.default_rng(0)
-    cols = np.arange(m) if m <= _SAMPLE else np.sort(rng.choice(m, _SAMPLE, replace=False))
-    sims = v @ v[cols].T
-    far = np.abs(np.arange(m)[:, None] - cols[None, :]) > exclude
-    mu, sd = robust_stats(sims[far].astype(np.float64))
+    from .retrieval import sample_columns, sampled_similarities
+
+    # The (m, 384) sample one row block at a time; only the distant values are kept
+    # (float32, 150 MB at 100k rows) and their median and MAD taken as before.
+    far = np.concatenate([block[~np.isnan(block)] for _, _, block in
+                          sampled_similarities(v, sample_columns(m, _SAMPLE, seed=0), exclude)])
+    mu, sd = robust_stats(far.astype(np.float64))
     return float(min(mu + k * sd, 0.99))
 
 

@@ -12,14 +12,22 @@ from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 from . import __version__
-from .errors import Cancelled, PanotopoError
-from .params import METHODS, MapParams
+from .errors import Cancelled, InputError, PanotopoError
+from .params import METHODS, PARAMETERS, MapParams
 
 EXIT_BAD_INPUT = 2
 EXIT_CANCELLED = 130
 
 
 # ----------------------------------------------------------------------------- helpers
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors in the one-line form of every other error (no usage block)."""
+
+    def error(self, message: str):
+        print(f"panotopo: error: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_BAD_INPUT)
+
 
 class _Bar:
     """A tqdm progress bar on stderr fed by the engine's (done, total, stage) callback."""
@@ -51,7 +59,8 @@ class _Bar:
 
 def _descriptor_options(args: argparse.Namespace) -> dict:
     """Descriptor-specific options given on the command line (only those set)."""
-    names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim")
+    names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim",
+             "precision")
     opts = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
     if getattr(args, "allow_download", False):
         opts["allow_download"] = True
@@ -69,29 +78,82 @@ def _cache(args: argparse.Namespace):
 def _describe(args: argparse.Namespace, shift: bool):
     from .pipeline import DescribeSettings, describe
 
+    from .validate import describe_options
+
+    options = describe_options(args.descriptor, _descriptor_options(args), name=_argument_name)
     settings = DescribeSettings(
         descriptor=args.descriptor, interval=args.interval, topic=args.topic,
-        shift=shift, options=_descriptor_options(args),
+        shift=shift, options=options, skip_bad_frames=args.skip_bad_frames,
     )
     bar = _Bar(args.quiet)
     try:
-        return describe(args.input, settings, progress=bar, cache=_cache(args))
+        descs = describe(args.input, settings, progress=bar, cache=_cache(args))
     finally:
         bar.close()
+    skipped = descs.meta.get("skipped_frames") or []
+    if skipped:
+        print(f"panotopo: skipped {len(skipped)} undecodable frame(s) of {args.input} "
+              f"(first: {skipped[0]})", file=sys.stderr)
+    return descs
 
 
 def _map_params(args: argparse.Namespace) -> MapParams:
-    return MapParams(
-        method=args.method, node_sim_th=args.node_sim_th, loop_sim_th=args.loop_sim_th,
-        window_size=args.window_size, count_th=args.count_th, neighbor_node_num=args.neighbor_node_num,
-        long_runs=args.long_runs,
-    )
+    return MapParams(**{p.name: getattr(args, p.name) for p in PARAMETERS if hasattr(args, p.name)})
+
+
+def _add_table_parameters(p: argparse.ArgumentParser) -> None:
+    """Options of the ``verified`` method, built from ``engine.params.PARAMETERS``."""
+    g = p.add_argument_group("verified method (defaults and their origin: engine/params.py)")
+    for par in PARAMETERS:
+        if par.methods == ("verified",):
+            g.add_argument("--" + par.name.replace("_", "-"), type=par.type, default=par.default,
+                           help=f"{par.help} (default: {par.default})")
+
+
+def _argument_name(key: str) -> str:
+    return "--" + key.replace("_", "-")
+
+
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Every numeric argument and every output, before anything slow runs (limits:
+    engine/limits.py): one clear line instead of a traceback or a silent nonsense result."""
+    from . import limits, validate
+    from .outputs import check_output
+
+    if getattr(args, "interval", None) is not None:
+        validate.interval(args.interval)
+    if getattr(args, "method", None) is not None:
+        validate.map_params(_map_params(args), name=_argument_name)
+    if getattr(args, "dist_th", None) is not None:
+        validate.number(args.dist_th, "--dist-th", above=0.0, hi=limits.MAX_DIST_TH_M)
+    if args.command == "demo":
+        validate.integer(args.seed, "--seed", lo=0, hi=limits.MAX_SEED)
+        validate.integer(args.width, "--width", lo=limits.MIN_DEMO_WIDTH, hi=limits.MAX_DEMO_WIDTH)
+        if args.input_height is not None:
+            validate.integer(args.input_height, "--input-height", lo=limits.MIN_INPUT_HEIGHT,
+                             hi=limits.MAX_INPUT_HEIGHT)
+    inputs = [getattr(args, k, None) for k in ("input", "map", "poses")]
+    for key in ("output", "plot"):
+        if getattr(args, key, None):
+            check_output(getattr(args, key), inputs)
+    if getattr(args, "output", None) and getattr(args, "plot", None):
+        check_output(args.plot, [args.output])
 
 
 def _load_poses(path: str, topic: Optional[str]):
     from .sources import read_poses
 
     return read_poses(Path(path), topic=topic)
+
+
+def _recording_poses(args: argparse.Namespace):
+    """Positions the recording carries itself (a photo folder's EXIF GPS); --poses wins."""
+    from .sources import recording_poses
+
+    poses, warnings = recording_poses(Path(args.input), interval=args.interval)
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
+    return poses
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -121,8 +183,11 @@ def cmd_map(args: argparse.Namespace) -> int:
         found = paper_thresholds(descs.vectors, params.neighbor_node_num)
         params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
     topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
-    poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    poses = _load_poses(args.poses, args.pose_topic) if args.poses else _recording_poses(args)
     if poses is not None:
+        from .validate import poses_cover
+
+        poses_cover(poses, topomap.stamps(), str(args.poses))
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
     topomap.write_graphml(args.output)
@@ -245,16 +310,21 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
     p.add_argument("--topic", help="image topic of a ROS bag (needed when it has several)")
     g = p.add_argument_group("descriptor options")
-    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth)")
+    g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth; megaloc: model.safetensors "
+                   "or megaloc.torch; boq: dinov2_12288.pth)")
     g.add_argument("--allow-download", action="store_true", help="let torch hub download missing weights")
     g.add_argument("--vocabulary", help="VLAD vocabulary: 'map' (build from the recording), a c_centers.pt file or a domain name")
-    g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg)")
+    g.add_argument("--backbone", help="AnyLoc backbone: vits14, vitb14, vitl14, vitg14 (+ _reg); default: read from --weights")
     g.add_argument("--layer", type=int, help="AnyLoc feature layer")
     g.add_argument("--facet", choices=("value", "key", "query", "token"), help="AnyLoc facet")
     g.add_argument("--device", help="auto, cpu, cuda or mps")
+    g.add_argument("--precision", choices=("auto", "float32", "bfloat16", "float16"),
+                   help="network arithmetic: auto = bfloat16 + TF32 on CUDA, float32 elsewhere (docs/gpu.md)")
     g.add_argument("--batch-size", type=int)
     g.add_argument("--input-height", type=int, help="descriptor input height in pixels (width = 2 x height)")
     g.add_argument("--pca-dim", type=int, help="project descriptors to this dimension (AnyLoc)")
+    p.add_argument("--skip-bad-frames", action="store_true",
+                   help="skip frames that cannot be decoded (and say how many) instead of stopping")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the descriptor cache")
     p.add_argument("--cache-dir", help="descriptor cache folder (default: $PANOTOPO_CACHE or ~/.cache/panotopo)")
 
@@ -264,11 +334,11 @@ AddCommand = Callable[[argparse._SubParsersAction, argparse.ArgumentParser], Non
 
 
 def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="panotopo", description="Topological maps from 360-degree recordings (panorama shift + place recognition).")
     parser.add_argument("--version", action="version", version=f"panotopo {__version__}")
     # -q works before or after the command name.
-    common = argparse.ArgumentParser(add_help=False)
+    common = _Parser(add_help=False)
     common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="print only errors")
     parser.add_argument("-q", "--quiet", action="store_true", help="print only errors")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -287,10 +357,12 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--auto-thresholds", action="store_true",
                    help="simple / shift-simple / ours: calibrate the node and loop thresholds not given "
                         "from the recording itself (as the benchmark does) instead of the descriptor's")
+    _add_table_parameters(p)
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
-                   help="verified: skip the long-run step that finds returns with a lateral offset "
+                   help="verified-rules: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")
-    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions")
+    p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
+                                    "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)
@@ -329,10 +401,22 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
 def main(argv: Optional[Sequence[str]] = None, extra_commands: Sequence[AddCommand] = ()) -> int:
     """Run the command line; ``extra_commands`` lets a higher layer (the desktop app's
     ``gui`` command) plug in without the engine ever importing it."""
+    import os
+    import warnings
+
+    # The user gets panotopo's one-line answers, not library chatter: OpenCV's decoder
+    # warnings (a corrupt image) and numpy's RuntimeWarnings (bad values are refused by
+    # the checks; what is left is harmless arithmetic such as 0/0 in an empty statistic).
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
+    warnings.simplefilter("ignore", RuntimeWarning)
     parser = build_parser(extra_commands)
     args = parser.parse_args(argv)
     try:
+        _check_arguments(args)
         return int(args.func(args) or 0)
+    except MemoryError:
+        print("panotopo: error: not enough memory for this input (see the limits in README.md)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except Cancelled:
         print("panotopo: cancelled", file=sys.stderr)
         return EXIT_CANCELLED

@@ -17,3 +17,18 @@ class InputError(PanotopoError):
 
 class Cancelled(PanotopoError):
     """A long run was cancelled by the user."""
+
+
+class OutputError(InputError, OSError):
+    """An output cannot be written there (it is an input, not a regular file, a full disk...).
+
+    Also an OSError, so that callers written for the OS's own write errors (the app's save
+    and autosave) handle it the same way; the message names the user's file."""
+
+    def __init__(self, message: str):
+        InputError.__init__(self, message)
+        self.filename = None
+        self.strerror = None
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""

@@ -112,6 +112,9 @@ def node_positions(topomap: TopoMap, poses: Optional[Poses]) -> tuple[np.ndarray
     if poses is not None:
         if len(poses) == 0:
             raise InputError("the ground-truth poses are empty")
+        from .validate import poses_cover
+
+        poses_cover(poses, topomap.stamps(), "the ground-truth poses")
         return poses.at(topomap.stamps())
     pos = topomap.positions()
     if pos is None:
@@ -165,8 +168,8 @@ def _events(pi: np.ndarray, pj: np.ndarray, m: int) -> np.ndarray:
 def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1.0,
              neighbor_node_num: Optional[int] = None, include_candidates: bool = False) -> Evaluation:
     """Count TP/FP/TN/FN of the map's loop arcs against ground truth (see module doc)."""
-    if dist_th < 0:
-        raise InputError(f"distance threshold must be >= 0, got {dist_th}")
+    if not dist_th >= 0 or dist_th == float("inf"):  # NaN compares false
+        raise InputError(f"distance threshold must be a finite number >= 0, got {dist_th}")
     if neighbor_node_num is None:
         neighbor_node_num = int(topomap.meta.get("neighbor_node_num", 0))
     nn = int(neighbor_node_num)

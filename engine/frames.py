@@ -55,6 +55,9 @@ def check_equirectangular(rgb: np.ndarray, where: str) -> None:
         raise InputError(
             f"{where}: frame is {w}x{h}, not an equirectangular 2:1 panorama"
         )
+    from .validate import frame_size
+
+    frame_size(w, h, where)  # too small to shift, or past the limits
 
 
 class FrameSource(ABC):

@@ -18,8 +18,10 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
   ``score`` float (calibrated descriptor score, standard deviations above the recording's own
   background), ``support`` float (the same along the matched stretch), ``direction`` int
   (+1 same way, -1 reverse), ``matches`` and ``inliers`` int (local features matched and
-  consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``confidence``
-  float (the ranking of the review queue).
+  consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``path_inliers``
+  int (the same measured between each end and its own path neighbour just outside the
+  temporal window: what "a few metres along the path" shares), ``confidence`` float (the
+  ranking of the review queue).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -29,8 +31,6 @@ from __future__ import annotations
 
 import copy as _copy
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import Iterable, Optional
 
@@ -41,7 +41,7 @@ from . import __version__
 from .descriptors.base import Descriptors
 from .errors import InputError
 from .loops import LoopCandidate
-from .params import MapParams
+from .params import PARAMETERS, MapParams
 
 STATUSES = ("auto", "candidate", "confirmed", "rejected", "manual")
 SETTABLE_STATUSES = ("auto", "candidate", "confirmed", "rejected")
@@ -53,11 +53,12 @@ _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label"
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
-               "confidence": float}
-EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "confidence")
-_GRAPH_TYPES = {"generator": str, "source": str, "method": str, "descriptor": str,
-                "node_sim_th": float, "loop_sim_th": float, "window_size": int,
-                "count_th": int, "neighbor_node_num": int, "interval": float, "long_runs": int}
+               "path_inliers": int, "confidence": float}
+EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
+                 "confidence")
+# Graph attributes: every map parameter with its declared type (bools stored as 0/1).
+_GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
+                **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}
 
 
 def _plain(value, kind=None):
@@ -277,6 +278,13 @@ class TopoMap:
         frames = self.frames()
         by_frame = {int(f): n for f, n in zip(frames, order)}
 
+        first, last = int(frames.min()), int(frames.max())
+
+        def inside(*fs: int) -> bool:
+            """A decision on frames outside the recording's mapped span is kept as
+            unapplied, not snapped to the end node (a crafted n0-n99 loop, issue 16)."""
+            return all(first <= f <= last for f in fs)
+
         def nearest(f: int) -> str:  # the first of two equally near nodes
             return order[int(np.argmin(np.abs(frames - f)))]
 
@@ -286,6 +294,9 @@ class TopoMap:
         for item in dec.get("loops", []):
             fa, fb = (int(f) for f in item["frames"])
             status = item.get("status")
+            if not inside(fa, fb):
+                self.unapplied["loops"].append(_copy.deepcopy(item))
+                continue
             u, v = by_frame.get(fa), by_frame.get(fb)
             if u is None or v is None or not is_loop(u, v):
                 u, v = nearest(fa), nearest(fb)
@@ -297,6 +308,9 @@ class TopoMap:
 
         for item in dec.get("manual", []):
             fa, fb = (int(f) for f in item["frames"])
+            if not inside(fa, fb):
+                self.unapplied["manual"].append(_copy.deepcopy(item))
+                continue
             u, v = nearest(fa), nearest(fb)
             yaw = item.get("yaw")
             if u != v and is_loop(u, v):
@@ -310,6 +324,9 @@ class TopoMap:
                 self.unapplied["manual"].append(_copy.deepcopy(item))
 
         for item in dec.get("labels", []):
+            if not inside(int(item["frame"])):
+                self.unapplied["labels"].append(_copy.deepcopy(item))
+                continue
             self.graph.nodes[nearest(int(item["frame"]))]["label"] = str(item["label"])
 
     # ----- copies and export --------------------------------------------------------------
@@ -342,16 +359,10 @@ class TopoMap:
     def write_graphml(self, path: str | Path, keep_rejected: bool = False,
                       keep_candidates: bool = False) -> None:
         """Write the corrected map; atomic (a temporary file replaced into place)."""
-        path = Path(path)
+        from .outputs import write_atomically
+
         g = self.corrected(keep_rejected, keep_candidates)
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
-            nx.write_graphml(g, tmp, infer_numeric_types=False)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_atomically(path, lambda f: nx.write_graphml(g, f, infer_numeric_types=False))
 
     @classmethod
     def read_graphml(cls, path: str | Path) -> "TopoMap":
@@ -371,8 +382,29 @@ class TopoMap:
                 raise InputError(f"{path}: node {n} lacks index/frame/stamp")
             d.setdefault("label", "")
             d.setdefault("shift", 0)
+        _check_nodes(g, path)
         for _, _, d in g.edges(data=True):
             d.setdefault("status", "auto")
             d.setdefault("kind", "sequential")
         meta = dict(g.graph)
         return cls(g, meta, None, None)
+
+
+def _check_nodes(g: nx.Graph, path: Path) -> None:
+    """The contract's node numbering, checked (issue 16): indices are the integers
+    0..m-1, each once; frames are integers >= 0; stamps are finite. Duplicate or negative
+    indices made evaluation count pairs that do not exist."""
+    seen: dict[int, str] = {}
+    for n, d in g.nodes(data=True):
+        try:
+            k, frame, stamp = int(d["index"]), int(d["frame"]), float(d["stamp"])
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: node {n} has a non-numeric index, frame or stamp") from None
+        if k < 0 or k >= g.number_of_nodes():
+            raise InputError(f"{path}: node {n} has index {k}, outside 0..{g.number_of_nodes() - 1}")
+        if k in seen:
+            raise InputError(f"{path}: nodes {seen[k]} and {n} have the same index {k}")
+        if frame < 0 or not np.isfinite(stamp):
+            raise InputError(f"{path}: node {n} has a negative frame or a non-finite stamp")
+        seen[k] = n
+        d["index"], d["frame"], d["stamp"] = k, frame, stamp

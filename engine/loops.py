@@ -32,6 +32,7 @@ import numpy as np
 
 from .errors import InputError
 from .params import METHODS, MapParams
+from .retrieval import pair_similarities
 
 # Bound the similarity block (rows x m float32) to about 32 MB.
 _BLOCK_ELEMENTS = 8_000_000
@@ -73,20 +74,11 @@ def detect_loops(node_vectors: np.ndarray, params: MapParams) -> list[LoopCandid
         counts = np.zeros(a.size, dtype=np.int64)
     order = np.lexsort((b, a))
     a, b, counts = a[order], b[order], counts[order]
-    sims = _pair_similarities(v, a, b)
+    sims = pair_similarities(v, a, b)
     return [
         LoopCandidate(int(i), int(j), float(s), int(c))
         for i, j, s, c in zip(a, b, sims, counts)
     ]
-
-
-def _pair_similarities(v: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 4096) -> np.ndarray:
-    """cos(v[a_k], v[b_k]) for every pair, a chunk at a time: gathering all pairs of
-    long descriptors at once would need (pairs x d) floats twice."""
-    out = np.empty(a.size, dtype=np.float32)
-    for k in range(0, a.size, chunk):
-        out[k:k + chunk] = np.einsum("ij,ij->i", v[a[k:k + chunk]], v[b[k:k + chunk]])
-    return out
 
 
 def _check_params(params: MapParams) -> None:

@@ -534,7 +534,9 @@ def verified_loops(node_vectors: np.ndarray, params: MapParams, node_columns: Op
     shifts (for the yaw of the run); without them it is skipped.
     """
     from .loops import LoopCandidate
+    from .validate import dense_nodes
 
+    dense_nodes(int(np.asarray(node_vectors).shape[0]), "verified-rules")  # before any m x m matrix
     exclude = int(params.neighbor_node_num)
     ps = score_pairs(node_vectors, node_columns, exclude, only_for=thresholds)
     chosen = select(ps, thresholds)

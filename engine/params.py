@@ -1,35 +1,127 @@
-"""Parameters of node creation and loop detection (plain data, shared by CLI, GUI, tests)."""
+"""Parameters of node creation and loop detection, each declared once (plain data).
+
+``PARAMETERS`` is the one typed table (RTAB-Map's ``Parameters.h`` is the model): name, type,
+default, allowed range, the methods that read it, what it does and where its number came
+from. ``MapParams`` holds one value per entry; the CLI builds its options from the table,
+the app shows it, and every value used is written into the GraphML ``graph`` attributes.
+"""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+import math
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Optional
 
-METHODS = ("simple", "shift-simple", "ours", "verified")
+from .limits import MAX_COSINE, MAX_NODE_COUNT_PARAM, MIN_COSINE
+
+METHODS = ("simple", "shift-simple", "ours", "verified", "verified-rules")
 # Methods whose descriptors are computed on panorama-shifted frames.
-SHIFTED_METHODS = ("shift-simple", "ours", "verified")
-# "verified" (beyond the paper, engine.loops_verified): thresholds calibrated from the
-# recording itself, sequence support, yaw-aligned verification; loop_sim_th, window_size
-# and count_th are not used by it, and node_sim_th None means "calibrate from the recording".
-# long_runs is read by "verified" only: off trades the returns with a lateral offset it finds
-# for the rare false loop it adds (README results).
+SHIFTED_METHODS = ("shift-simple", "ours", "verified", "verified-rules")
 METHOD_DESCRIPTIONS = {
     "simple": "Simple threshold: any pair with similarity >= loop_sim_th (no panorama shift)",
     "shift-simple": "Panorama shift + simple threshold",
     "ours": "Panorama shift + spatial consistency check (the paper's method)",
-    "verified": "Calibrated scores + sequence support + yaw-aligned verification (beyond the paper)",
+    "verified": "Retrieval + calibrated scores + support along the stretch + two-view geometry "
+                "on the sphere + heading consistency; auto loops and candidates for review",
+    "verified-rules": "The first round's verified method (rules tuned on one synthetic world; "
+                      "kept for comparison)",
 }
+PAPER_METHODS = ("simple", "shift-simple", "ours")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One declared parameter: the single source of its type, default, range and meaning."""
+
+    name: str
+    type: type
+    default: object
+    methods: tuple[str, ...]
+    help: str
+    origin: str                     # where the default number came from
+    minimum: Optional[float] = None
+    maximum: Optional[float] = None
+
+
+_ALL = METHODS
+_NEW = ("verified",)
+
+PARAMETERS: tuple[Parameter, ...] = (
+    Parameter("method", str, "verified", _ALL, "loop detection method", "the project's default"),
+    Parameter("node_sim_th", float, None, _ALL,
+              "node similarity threshold: a frame starts a new node when its cosine to the last "
+              "node drops below it (None: the descriptor's default; verified: from the recording)",
+              "paper section 3; calibrated per descriptor", MIN_COSINE, MAX_COSINE),
+    Parameter("loop_sim_th", float, None, PAPER_METHODS,
+              "loop similarity threshold of the paper's methods (None: the descriptor's default)",
+              "paper section 4; calibrated per descriptor", MIN_COSINE, MAX_COSINE),
+    Parameter("window_size", int, 5, ("ours",), "window of the spatial consistency check",
+              "paper section 4", 1, MAX_NODE_COUNT_PARAM),
+    Parameter("count_th", int, 2, ("ours",), "loops needed inside the window", "paper section 4",
+              0, MAX_NODE_COUNT_PARAM),
+    Parameter("neighbor_node_num", int, 5, _ALL,
+              "temporal neighbours: nodes this close along the path are never a loop",
+              "paper section 4", 0, MAX_NODE_COUNT_PARAM),
+    Parameter("long_runs", bool, True, ("verified-rules",),
+              "verified-rules step 5: returns with a lateral offset", "first round"),
+    Parameter("retrieval_k", int, 10, _NEW,
+              "best descriptor matches kept per node as loop candidates",
+              "the probe of issue 13: true pairs sat among each node's 10 best matches", 1, 200),
+    Parameter("candidate_z", float, 3.0, _NEW,
+              "a match becomes a candidate for review at this calibrated score (standard "
+              "deviations above the two nodes' own background)",
+              "chosen on the first synthetic family (benchmarks/bench_families.py --tune)", 0.0, 100.0),
+    Parameter("support_half", int, 3, _NEW,
+              "nodes on each side of a candidate averaged along its stretch (forward or reverse)",
+              "chosen on the first synthetic family", 1, 50),
+    Parameter("auto_z", float, 5.0, _NEW,
+              "calibrated score for an automatic loop with no geometry (with auto_support)",
+              "chosen on the first synthetic family", 0.0, 100.0),
+    Parameter("auto_support", float, 3.0, _NEW,
+              "mean calibrated score along the stretch for an automatic loop",
+              "chosen on the first synthetic family", 0.0, 100.0),
+    Parameter("auto_inliers", int, 40, _NEW,
+              "two-view inliers for an automatic loop",
+              "the probe of issue 13 (false pairs at most 40 outdoors); chosen on the first family",
+              0, 100_000),
+    Parameter("auto_inlier_ratio", float, 0.3, _NEW,
+              "share of matches that are inliers for an automatic loop",
+              "chosen on the first synthetic family", 0.0, 1.0),
+    Parameter("auto_lift", float, 1.5, _NEW,
+              "an automatic loop shares this many times the inliers each end shares with its own "
+              "path neighbour just outside the temporal window",
+              "chosen on the first synthetic family", 0.0, 100.0),
+    Parameter("place_radius", int, 4, _NEW,
+              "one loop per place: a loop must be the most confident within this many nodes "
+              "on both ends", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
+    Parameter("heading_tol", float, 35.0, _NEW,
+              "degrees a cycle of path and two loops may miss closing (plus drift along the path)",
+              "chosen on the first synthetic family", 0.0, 180.0),
+)
+BY_NAME = {p.name: p for p in PARAMETERS}
 
 
 @dataclass(frozen=True)
 class MapParams:
+    """One value per entry of ``PARAMETERS`` (same names, same defaults; a test checks)."""
+
     method: str = "verified"
-    node_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
-    loop_sim_th: Optional[float] = None   # None: the descriptor's calibrated default
+    node_sim_th: Optional[float] = None
+    loop_sim_th: Optional[float] = None
     window_size: int = 5
     count_th: int = 2
     neighbor_node_num: int = 5
-    long_runs: bool = True                # verified: step 5, long runs (returns with a lateral offset)
+    long_runs: bool = True
+    retrieval_k: int = 10
+    candidate_z: float = 3.0
+    support_half: int = 3
+    auto_z: float = 5.0
+    auto_support: float = 3.0
+    auto_inliers: int = 40
+    auto_inlier_ratio: float = 0.3
+    auto_lift: float = 1.5
+    place_radius: int = 4
+    heading_tol: float = 35.0
 
     def resolved(self, defaults: dict) -> "MapParams":
         """Fill every None from a descriptor's ``defaults``."""
@@ -42,3 +134,28 @@ class MapParams:
     @property
     def uses_shift(self) -> bool:
         return self.method != "simple"
+
+    def problems(self) -> list[tuple[str, str]]:
+        """(field, what is wrong) for every value outside its declared type or range."""
+        out = []
+        if self.method not in METHODS:
+            out.append(("method", f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}"))
+        for f in fields(self):
+            p = BY_NAME[f.name]
+            v = getattr(self, f.name)
+            if v is None or p.type in (str, bool):
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                out.append((p.name, f"expected a number, got {v!r}"))
+            elif p.type is int and v != int(v):
+                out.append((p.name, f"expected a whole number, got {v!r}"))
+            elif not math.isfinite(v):
+                out.append((p.name, f"must be a finite number, got {v}"))
+            elif (p.minimum is not None and v < p.minimum) or (p.maximum is not None and v > p.maximum):
+                out.append((p.name, f"must lie in [{p.minimum:g}, {p.maximum:g}], got {v:g}"))
+        return out
+
+
+def parameters_for(method: str) -> list[Parameter]:
+    """The parameters ``method`` reads, in table order."""
+    return [p for p in PARAMETERS if method in p.methods and p.name != "method"]

@@ -28,6 +28,7 @@ class DescribeSettings:
     topic: Optional[str] = None
     shift: bool = True
     options: dict = field(default_factory=dict)  # passed to the descriptor model
+    skip_bad_frames: bool = False  # skip undecodable frames (listed in meta "skipped_frames")
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -51,6 +52,7 @@ def describe(
     """
     from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
+    from .features import FEATURES_VERSION
     from .verify import COLUMNS_VERSION
 
     path = Path(path)
@@ -59,20 +61,29 @@ def describe(
     if not path.exists():
         raise InputError(f"{path}: no such file or directory")
 
+    from .validate import interval as check_interval
+
+    check_interval(settings.interval, "interval")
     model = descriptor_registry.get(settings.descriptor, **settings.options)
     key = None
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
-                         **model.settings()})
+                         "features": FEATURES_VERSION, **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
 
+    from .frame_guard import check_describe_memory, checked_frames
+
     with open_source(path, topic=settings.topic, interval=settings.interval) as source:
         expected = source.expected_samples(settings.interval)
-        result = describe_frames(source.frames(settings.interval), expected, settings,
+        check_describe_memory(expected, model, str(path))
+        skipped: list[int] = []
+        frames = checked_frames(source, settings.interval, settings.skip_bad_frames, skipped)
+        result = describe_frames(frames, expected, settings,
                                  model=model, source=str(path), progress=progress, cancel=cancel)
+        result.meta["skipped_frames"] = skipped
     if cache is not None and key is not None:
         cache.store(key, result)
     return result
@@ -92,9 +103,11 @@ def describe_frames(
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
     (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
-    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset.
+    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset,
+    and the local features of each shifted frame (``Descriptors.features``) for two-view geometry.
     """
     from .colour import colour_histogram
+    from .features import FeatureTable, extract
     from .shift import apply_shift, canonical_shift
     from .verify import column_features
 
@@ -105,6 +118,7 @@ def describe_frames(
     shifts: list[int] = []
     columns: list[np.ndarray] = []
     colours: list[np.ndarray] = []
+    features: list = []
     frame_width: list[int] = []
 
     def shifted_images() -> Iterator[np.ndarray]:
@@ -117,6 +131,7 @@ def describe_frames(
             rgb = apply_shift(frame.rgb, s) if s else frame.rgb
             columns.append(column_features(rgb))
             colours.append(colour_histogram(rgb))
+            features.append(extract(rgb))
             if not frame_width:
                 frame_width.append(int(frame.rgb.shape[1]))
             yield rgb
@@ -142,15 +157,26 @@ def describe_frames(
         meta=meta,
         columns=np.stack(columns).astype(np.float16) if columns else None,
         colours=np.stack(colours).astype(np.float16) if colours else None,
+        features=FeatureTable.from_list(features) if features else None,
     )
 
 
 def descriptor_defaults(descs: Descriptors) -> dict:
-    """The calibrated thresholds for the descriptor that made ``descs``."""
+    """The calibrated thresholds for the descriptor that made ``descs``.
+
+    Stored defaults first, then the registered model's; descriptors of a model this
+    project does not know (an .npz from any other model) get thresholds calibrated from
+    the recording itself (``engine.calibrate.paper_thresholds``, sampled, fine at 100k
+    rows), with the default temporal window of MapParams.
+    """
     if descs.meta.get("defaults"):
         return dict(descs.meta["defaults"])
     name = descs.meta.get("descriptor", descriptor_registry.DEFAULT_DESCRIPTOR)
-    return descriptor_registry.defaults_for(name)
+    if name in descriptor_registry.REGISTRY:
+        return descriptor_registry.defaults_for(name)
+    from .calibrate import paper_thresholds
+
+    return paper_thresholds(descs.vectors, MapParams().neighbor_node_num)
 
 
 def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = ""):
@@ -159,9 +185,12 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     from .loops import detect_loops
     from .nodes import make_nodes
 
+    from .validate import map_params
+
+    map_params(params)
     if len(descs) == 0:
         raise InputError("no descriptors to map")
-    if params.method == "verified" and params.node_sim_th is None:
+    if params.method in ("verified", "verified-rules") and params.node_sim_th is None:
         from .calibrate import node_threshold
 
         params = replace(params, node_sim_th=node_threshold(descs.vectors))
@@ -171,13 +200,21 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
                          f"{'without' if not params.uses_shift else 'with'} --no-shift")
     node_rows = make_nodes(descs.vectors, p.node_sim_th)
+    columns = None if descs.columns is None else descs.columns[node_rows]
+    frame_width = int(descs.meta.get("frame_width", 0))
     if p.method == "verified":
+        from .loop_closure import detect_loops as verified
+
+        loops = verified(descs.vectors[node_rows], p, node_rows=node_rows,
+                         features=getattr(descs, "features", None), columns=columns,
+                         shifts=descs.shifts[node_rows], frame_width=frame_width,
+                         cache=descs.cache.setdefault(("nodes", p.node_sim_th), {}))
+    elif p.method == "verified-rules":
         from .loops_verified import verified_loops
 
-        columns = None if descs.columns is None else descs.columns[node_rows]
         colours = None if descs.colours is None else descs.colours[node_rows]
         loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
-                               int(descs.meta.get("frame_width", 0)), node_colours=colours)
+                               frame_width, node_colours=colours)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}

@@ -15,6 +15,7 @@ import numpy as np
 
 from .evaluate import Evaluation, node_positions
 from .graph import TopoMap
+from .limits import MAX_DENSE_NODES
 from .loops import similarity_matrix
 from .poses import Poses
 
@@ -101,7 +102,7 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
 
     # Right: similarity matrix (when descriptors are at hand) with loops overlaid.
     m = topomap.node_count
-    if topomap.node_vectors is not None and m:
+    if topomap.node_vectors is not None and 0 < m <= MAX_DENSE_NODES:  # an m x m picture
         img = axm.imshow(similarity_matrix(topomap.node_vectors), cmap="magma", vmin=-0.2, vmax=1.0,
                          interpolation="nearest")
         fig.colorbar(img, ax=axm, fraction=0.046, pad=0.04, label="cosine similarity")
@@ -110,7 +111,8 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
         axm.set_xlim(-0.5, m - 0.5)
         axm.set_ylim(m - 0.5, -0.5)
         axm.set_aspect("equal")
-        axm.set_title("loops by node index (no descriptors)", fontsize=10)
+        why = "no descriptors" if topomap.node_vectors is None or not m else f"over {MAX_DENSE_NODES:,} nodes"
+        axm.set_title(f"loops by node index ({why})", fontsize=10)
     if evaluation is not None and evaluation.fn_pairs:
         fn = np.asarray(evaluation.fn_pairs)
         axm.scatter(fn[:, 1], fn[:, 0], s=6, color=COLOURS["FN"], alpha=0.5, marker="s",
@@ -123,4 +125,9 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
     axm.set_ylabel("node")
 
     fig.tight_layout()
-    fig.savefig(str(path))
+    from .outputs import write_atomically
+
+    suffix = Path(path).suffix.lower().lstrip(".")
+    if suffix not in fig.canvas.get_supported_filetypes():
+        suffix = "png"
+    write_atomically(path, lambda f: fig.savefig(f, format=suffix))

@@ -11,8 +11,6 @@ half-written session. Plain data only: no Qt here.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -74,19 +72,10 @@ class Session:
 
     def save(self, path: str | Path) -> None:
         """Write atomically: the old file stays intact until the new one is complete."""
+        from .outputs import write_text
+
         path = Path(path)
-        text = json.dumps(self.to_json(path.parent), indent=1, sort_keys=True)
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(text)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        write_text(path, json.dumps(self.to_json(path.parent), indent=1, sort_keys=True))
 
     # -- reading ---------------------------------------------------------------
     @classmethod
@@ -104,34 +93,33 @@ class Session:
 
     @classmethod
     def from_json(cls, data: Any, path: Path) -> "Session":
+        """A session from parsed JSON; every field is checked (``check_fields``) so that a
+        malformed or crafted file gets one line naming the field, never reaches Qt slots
+        or the descriptor constructor unchecked."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise InputError(f"{path}: not a panotopo session file")
-        version = data.get("version")
-        if not isinstance(version, int) or version > VERSION:
-            raise InputError(f"{path}: session version {version!r} is newer than this panotopo understands")
-        if not isinstance(data.get("input"), str) or not data["input"]:
-            raise InputError(f"{path}: session has no input recording")
-        for key in ("describe", "params", "decisions", "view"):
-            if not isinstance(data.get(key, {}), dict):
-                raise InputError(f"{path}: session field '{key}' is malformed")
-        poses = data.get("poses")
-        if poses is not None and not (isinstance(poses, dict) and isinstance(poses.get("path"), str)):
-            raise InputError(f"{path}: session field 'poses' is malformed")
+        try:
+            fields = check_fields(data)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None
         base = path.parent
-        session = cls(
-            input_path=_resolve(data["input"], base),
-            describe=dict(data.get("describe", {})),
-            params=dict(data.get("params", {})),
-            decisions=dict(data.get("decisions", {})),
+        poses = fields["poses"]
+        return cls(
+            input_path=_resolve(fields["input"], base),
+            describe=fields["describe"],
+            params=fields["params"],
+            decisions=fields["decisions"],
             poses_path=_resolve(poses["path"], base) if poses else None,
             poses_topic=poses.get("topic") if poses else None,
-            view=dict(data.get("view", {})),
+            view=fields["view"],
         )
-        try:
-            session.map_params()
-        except TypeError:
-            raise InputError(f"{path}: session parameters are malformed") from None
-        return session
+
+
+def check_fields(data: dict) -> dict:
+    """The checked fields of a session's JSON (see ``engine.session_fields``)."""
+    from .session_fields import check_session
+
+    return check_session(data, VERSION)
 
 
 def _portable(path: str, base_dir: Optional[Path]) -> str:

@@ -1186,6 +1186,8 @@ class MainWindow(QMainWindow):
         return [str(v) for v in (value or [])]
 
     def _add_recent(self, path: str) -> None:
+        if not self.interactive:  # a screenshot or scripted run must not touch the user's list
+            return
         path = str(Path(path).resolve())
         recent = [path] + [r for r in self.recent_files() if r != path]
         self.settings.setValue("recent", recent[:int(self.defaults["ui"].get("max_recent_files", 10))])

@@ -71,7 +71,7 @@ class ParamsPanel(QWidget):
                                          "from this recording's own similarities (undoable)")
         self.calibrate_button.clicked.connect(self.calibrateRequested)
         self.long_runs = QCheckBox("Long runs")
-        self.long_runs.setToolTip("verified: also look for stretches driven twice with a lateral offset "
+        self.long_runs.setToolTip("verified-rules: also look for stretches driven twice with a lateral offset "
                                   "(finds more returns, rarely a false loop)")
 
         self.method.currentIndexChanged.connect(lambda _: self._edited("method"))
@@ -178,7 +178,8 @@ PARAMS_USED = {
     "simple": {"node_sim_th", "loop_sim_th"},
     "shift-simple": {"node_sim_th", "loop_sim_th"},
     "ours": {"node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"},
-    "verified": {"node_sim_th", "neighbor_node_num", "long_runs"},
+    "verified": {"node_sim_th", "neighbor_node_num"},
+    "verified-rules": {"node_sim_th", "neighbor_node_num", "long_runs"},
 }
 
 

@@ -408,3 +408,58 @@ def test_cli_map_and_describe_with_anyloc_vlad(ckpt, tmp_path):
     assert main(["map", str(video), "-o", str(out), *common]) == 0
     graph = nx.read_graphml(out)
     assert graph.graph["descriptor"] == "anyloc-vlad" and graph.number_of_nodes() >= 1
+
+
+# ---------------------------------------------------------------- backbone from the checkpoint
+
+def shape_only_checkpoint(path, backbone: str) -> str:
+    """A checkpoint with the official keys and shapes of ``backbone`` whose tensors are one
+    broadcast number each (a few kB on disk even for ViT-G/14): enough to read shapes from."""
+    state = {k: torch.zeros(()).expand(shape) for k, shape in shapes_of(backbone).items()}
+    torch.save(state, path)
+    return str(path)
+
+
+@pytest.mark.parametrize("backbone", ["vitb14", "vitl14_reg", "vitg14", "vits14_reg"])
+def test_backbone_is_read_from_the_checkpoint_shapes(backbone, tmp_path):
+    path = shape_only_checkpoint(tmp_path / "weights.pth", backbone)
+    assert dinov2.checkpoint_arch(path) == dinov2.get_arch(backbone)
+    model = AnyLocVLAD(weights=path)                 # no backbone given
+    assert model.arch == dinov2.get_arch(backbone)
+    assert model.layer == {"vitb14": 10, "vitl14_reg": 20, "vitg14": 31, "vits14_reg": 10}[backbone]
+
+
+def test_checkpoint_without_backbone_option_describes(ckpt):
+    out = AnyLocVLAD(weights=ckpt, input_height=H).describe(iter(images(2)), 2)
+    assert out.shape == (2, 32 * 384)
+
+
+def test_backbone_contradicting_the_checkpoint_is_one_clear_line(ckpt, tmp_path):
+    with pytest.raises(InputError) as err:
+        AnyLocGeM(weights=ckpt, backbone="vitg14")
+    msg = str(err.value)
+    assert "holds DINOv2 ViT-S/14" in msg and "ViT-G/14" in msg and "--backbone vits14" in msg
+    assert "\n" not in msg
+    foreign = tmp_path / "other.pth"
+    torch.save({"conv.weight": torch.zeros(3, 3)}, foreign)
+    with pytest.raises(InputError, match="cannot tell its backbone"):
+        AnyLocVLAD(weights=str(foreign))
+
+
+def test_cli_describe_without_backbone_reads_it_from_the_weights(ckpt, tmp_path):
+    import cv2
+
+    from engine.cli import main
+
+    video = tmp_path / "rec.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (128, 64))
+    for i in range(20):
+        writer.write(np.roll(images(1)[0], 3 * i, axis=1)[:, :, ::-1])
+    writer.release()
+    npz = tmp_path / "d.npz"
+    args = ["describe", str(video), "-o", str(npz), "--descriptor", "anyloc-gem", "--weights", ckpt,
+            "--input-height", str(H), "--no-cache", "-q"]
+    assert main(args) == 0
+    with np.load(npz) as z:
+        assert z["descriptors"].shape[1] == 384
+    assert main(args + ["--backbone", "vitb14"]) != 0

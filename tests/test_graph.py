@@ -270,3 +270,17 @@ def test_decisions_nearest_node_rule():
     assert tm.graph.nodes["n1"]["label"] == "hall"              # 44 is nearer 30 than 60
     assert tm.unapplied == {"loops": [], "manual": [{"frames": [1, 2], "yaw": None}], "labels": []}
     assert {"frames": [1, 2], "yaw": None} in tm.decisions()["manual"]
+
+
+def test_decisions_outside_the_mapped_frames_are_kept_unapplied_not_snapped():
+    """Issue 16 (finding 11): frames beyond the recording made a manual loop n0-n99 appear."""
+    tm = small_map()  # nodes at frames 0, 30, ..., 570
+    last = int(tm.frames().max())
+    outside = {"loops": [{"frames": [0, last + 5000], "status": "rejected"}],
+               "manual": [{"frames": [0, 10**9], "yaw": None}],
+               "labels": [{"frame": last + 1, "label": "far away"}]}
+    before = {(u, v) for u, v, _ in tm.loops()}
+    tm.apply_decisions(outside)
+    assert {(u, v) for u, v, _ in tm.loops()} == before
+    assert not any(d.get("label") for _, d in tm.graph.nodes(data=True))
+    assert tm.unapplied == outside          # kept, so a later map can still use them

@@ -60,3 +60,11 @@ def test_bad_input_exits_non_zero_with_one_line(tmp_path, name, content):
     assert len(lines) == 1 and name in lines[0]
     assert "Traceback" not in proc.stderr
     assert not png.exists()
+
+
+def test_screenshot_leaves_the_recent_files_list_alone(descriptors_file, tmp_path):
+    """Finding 16 of issue 16: a screenshot run is not the user opening a file."""
+    proc = _run([descriptors_file, tmp_path / "window.png"], tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    written = "".join(p.read_text(errors="replace") for p in (tmp_path / "config").rglob("*") if p.is_file())
+    assert "recent" not in written and str(descriptors_file) not in written

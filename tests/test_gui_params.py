@@ -6,7 +6,8 @@ import pytest
 @pytest.mark.parametrize("method, enabled, disabled", [
     ("ours", {"loop_sim_th", "window_size", "count_th", "neighbor_node_num"}, {"long_runs"}),
     ("simple", {"loop_sim_th"}, {"window_size", "count_th", "neighbor_node_num", "long_runs"}),
-    ("verified", {"neighbor_node_num", "long_runs"}, {"loop_sim_th", "window_size", "count_th"}),
+    ("verified", {"neighbor_node_num"}, {"loop_sim_th", "window_size", "count_th", "long_runs"}),
+    ("verified-rules", {"neighbor_node_num", "long_runs"}, {"loop_sim_th", "window_size", "count_th"}),
 ])
 def test_parameters_panel_enables_what_the_method_reads(qtbot, method, enabled, disabled):
     from gui.params_panel import ParamsPanel

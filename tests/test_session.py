@@ -65,7 +65,9 @@ def test_autosave_is_a_separate_file(tmp_path):
     (b'{"format": "panotopo-session", "version": 1}', "no input"),
     (b'{"format": "panotopo-session", "version": 99, "input": "x"}', "newer"),
     (b'{"format": "panotopo-session", "version": 1, "input": "x", "decisions": [1]}', "'decisions'"),
-    (b'{"format": "panotopo-session", "version": 1, "input": "x", "params": {"bogus": 1, "window_size": "a", "method": 3}}', None),
+    (b'{"format": "panotopo-session", "version": 1, "input": "x", "params": {"bogus": 1}}', None),
+    (b'{"format": "panotopo-session", "version": 1, "input": "x", "params": {"window_size": "a"}}',
+     "'params.window_size'"),
 ])
 def test_bad_files_raise_input_error(tmp_path, content, reason):
     path = tmp_path / "bad.panotopo.json"

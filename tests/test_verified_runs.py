@@ -38,7 +38,7 @@ def offset_indoor():
 def test_offset_return_is_closed_by_a_long_run_and_nothing_else_is(offset_indoor):
     descs = offset_indoor.by_shift[True]
     assert descs.colours is not None and descs.colours.shape == (len(descs), 512)
-    topomap = build_map(descs, MapParams())
+    topomap = build_map(descs, MapParams(method="verified-rules"))
     ev = evaluate(topomap, offset_indoor.poses, neighbor_node_num=5)
     assert ev.fp == 0
     assert ev.events_total == 1 and ev.events_found == 1
@@ -51,7 +51,7 @@ def test_offset_return_is_closed_by_a_long_run_and_nothing_else_is(offset_indoor
 def test_without_colour_histograms_the_offset_return_stays_open(offset_indoor):
     """Files written before colour histograms existed map as before (step 5 skipped)."""
     descs = replace(offset_indoor.by_shift[True], colours=None)
-    ev = evaluate(build_map(descs, MapParams()), offset_indoor.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), offset_indoor.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == 0
 
 
@@ -77,7 +77,7 @@ def test_a_corridor_return_whose_alignment_flips_is_still_parallel():
     """Indoors the column alignment says 0 degrees on most pairs of a true return driven the
     other way (a corridor looks alike both ways): only the yaw's axis is checked."""
     case = describe_case(Case("offset", "indoor", seed=40), shifts=(True,), input_height=128)
-    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(case.by_shift[True], MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
 
 
@@ -85,7 +85,7 @@ def test_runs_the_alignment_says_went_the_other_way_are_not_loops():
     """Second laps of an outdoor loop also make backward runs between two streets; the
     alignment is sure those pairs face the same way, so they are rejected."""
     case = describe_case(Case("loop", "outdoor", seed=72, people=3, noise=0.01), shifts=(True,), input_height=128)
-    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(case.by_shift[True], MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 2
 
 
@@ -97,10 +97,10 @@ def test_in_open_spaces_local_alignment_picks_the_diagonal_of_the_same_place(mon
     case = describe_case(Case("offset", "outdoor", seed=92, people=3, noise=0.01), shifts=(True,),
                          input_height=128)
     descs = case.by_shift[True]
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
     monkeypatch.setattr(lv, "LOCAL_STEP_MAX", 0.0)   # the descriptor's mean decides everywhere
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 1 and ev.events_found == 0
 
 
@@ -111,7 +111,7 @@ def test_mirror_alike_streets_of_a_crossing_route_are_not_loops(look):
     wrong way to the column alignment (outdoors, where it is reliable)."""
     case = describe_case(Case("crossing", look, seed=94, people=4, lighting_drift=0.3, noise=0.01),
                          shifts=(True,), input_height=128)
-    ev = evaluate(build_map(case.by_shift[True], MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(case.by_shift[True], MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0
 
 
@@ -144,10 +144,10 @@ def test_a_street_that_looks_alike_along_its_length_is_not_a_loop(monkeypatch):
     case = describe_case(Case("crossing", "outdoor", seed=182, people=3, noise=0.01), shifts=(True,),
                          input_height=128)
     descs = case.by_shift[True]
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
     monkeypatch.setattr(lv, "MIN_TURN_SAME_WAY", 0.0)
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 1
 
 
@@ -160,10 +160,10 @@ def test_a_sequence_loop_is_placed_on_the_diagonal_of_the_same_place(monkeypatch
     case = describe_case(Case("reverse", "outdoor", seed=202, people=3, noise=0.01), shifts=(True,),
                          input_height=128)
     descs = case.by_shift[True]
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
     monkeypatch.setattr(lv, "_PARALLEL_AXIS", -1.0)   # no sequence loop is moved
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 1
 
 
@@ -174,14 +174,14 @@ def test_a_place_passed_a_third_time_is_joined_to_the_first_pass(monkeypatch):
 
     case = describe_case(Case("loop", "indoor", seed=31), shifts=(True,), input_height=128)
     descs = case.by_shift[True]
-    topomap = build_map(descs, MapParams())
+    topomap = build_map(descs, MapParams(method="verified-rules"))
     ev = evaluate(topomap, case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 2
     index = topomap.graph.nodes
     lags = [index[v]["index"] - index[u]["index"] for u, v, _ in topomap.loops()]
     assert max(lags) > 1.5 * np.median(lags)   # a loop across two laps
     monkeypatch.setattr(lv, "_visits_again", lambda *args: [])
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == 1
 
 
@@ -194,10 +194,10 @@ def test_pairs_on_the_diagonal_line_through_a_crossing_are_not_loops(monkeypatch
     case = describe_case(Case("crossing", "outdoor", seed=244, people=4, lighting_drift=0.3, noise=0.01),
                          shifts=(True,), input_height=128)
     descs = case.by_shift[True]
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
     monkeypatch.setattr(lv, "_CROSSING_AXIS", 90.0)   # no loop counts as a crossing
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 1
 
 
@@ -209,8 +209,8 @@ def test_one_u_turn_is_not_enough_to_pass_a_place_the_same_way_again(monkeypatch
 
     case = describe_case(Case("offset", "outdoor", seed=250), shifts=(True,), input_height=128)
     descs = case.by_shift[True]
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 0 and ev.events_found == ev.events_total == 1
     monkeypatch.setattr(lv, "MIN_TURN_SAME_WAY", 180.0)   # half a circle, as before
-    ev = evaluate(build_map(descs, MapParams()), case.poses, neighbor_node_num=5)
+    ev = evaluate(build_map(descs, MapParams(method="verified-rules")), case.poses, neighbor_node_num=5)
     assert ev.fp == 1

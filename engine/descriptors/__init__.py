@@ -18,6 +18,8 @@ REGISTRY: dict[str, str] = {
     "effnet-vlad": "engine.descriptors.efficientnet:EfficientNetVLAD",
     "anyloc-vlad": "engine.descriptors.anyloc:AnyLocVLAD",
     "anyloc-gem": "engine.descriptors.anyloc:AnyLocGeM",
+    "megaloc": "engine.descriptors.megaloc:MegaLoc",
+    "boq": "engine.descriptors.boq:BoQ",
 }
 
 __all__ = [

@@ -20,7 +20,6 @@ import os
 from pathlib import Path
 from typing import Iterable, Iterator, Optional
 
-import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
@@ -28,14 +27,16 @@ import torch.nn.functional as F
 from ..errors import InputError
 from ..progress import CancelToken, Progress, check, report
 from . import dinov2
-from .base import DescriptorModel
+from .accel import (check_precision, compute, full_precision, pick_device, resolve_precision,
+                    to_network_input)
+from .base import DescriptorModel, in_batches
+from .mapvocab import pool_recording, sample_rows
 from .vlad import kmeans_cosine, l2_normalize, vlad
+from .vlad_torch import vlad_batch
 
 # Layer per backbone when the user sets none: the layers AnyLoc's paper compares the ViTs at
 # (its ablation over layers picked 31 of 40 for ViT-G, 20 of 24 for ViT-L, 10 of 12 for S and B).
 DEFAULT_LAYERS = {"vits14": 10, "vitb14": 10, "vitl14": 20, "vitg14": 31}
-IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
-IMAGENET_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
 # A map vocabulary is clustered from at most this many patch features (a uniform random
 # sample of all of them): k-means cost and memory stay bounded on long recordings.
 MAX_VOCAB_FEATURES = 100_000
@@ -43,25 +44,6 @@ VOCAB_FILE = "c_centers.pt"
 
 
 # ---------------------------------------------------------------- small helpers
-
-def pick_device(device: str = "auto") -> torch.device:
-    """"auto" = CUDA if present, else Apple MPS, else CPU; an explicit device must exist."""
-    device = (device or "auto").lower()
-    mps = getattr(torch.backends, "mps", None)
-    mps_ok = bool(mps is not None and mps.is_available())
-    if device == "auto":
-        if torch.cuda.is_available():
-            return torch.device("cuda")
-        return torch.device("mps" if mps_ok else "cpu")
-    if device.startswith("cuda") and not torch.cuda.is_available():
-        raise InputError(f"device '{device}' asked for, but CUDA is not available here")
-    if device == "mps" and not mps_ok:
-        raise InputError("device 'mps' asked for, but Apple MPS is not available here")
-    try:
-        return torch.device(device)
-    except RuntimeError:
-        raise InputError(f"unknown device '{device}' (use auto, cpu, cuda or mps)") from None
-
 
 def input_size(input_height: int) -> tuple[int, int]:
     """(height, width) fed to the ViT: H x 2H cropped down to multiples of 14."""
@@ -71,18 +53,11 @@ def input_size(input_height: int) -> tuple[int, int]:
 
 
 def preprocess(rgb: np.ndarray, input_height: int) -> np.ndarray:
-    """float32 (3, h, w) network input: resized to H x 2H, centre-cropped to 14s, mean/std normalised."""
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise InputError(f"expected an RGB image, got shape {rgb.shape}")
-    width = 2 * input_height
-    shrink = rgb.shape[0] > input_height
-    img = cv2.resize(rgb, (width, input_height),
-                     interpolation=cv2.INTER_AREA if shrink else cv2.INTER_CUBIC)
-    h, w = input_size(input_height)
-    top = int(round((input_height - h) / 2.0))   # centre crop, rounded as torchvision does
-    left = int(round((width - w) / 2.0))
-    img = img[top:top + h, left:left + w].astype(np.float32) / 255.0
-    return ((img - IMAGENET_MEAN) / IMAGENET_STD).transpose(2, 0, 1)
+    """float32 (3, h, w) network input of one image, on the CPU: resized to H x 2H, centre-cropped
+    to multiples of 14, mean/std normalised (``accel.to_network_input``, as ``describe`` does)."""
+    x = to_network_input([rgb], (input_height, 2 * input_height), input_size(input_height),
+                         torch.device("cpu"), "AnyLoc")
+    return x[0].numpy()
 
 
 def file_identity(path: Path, probe: int = 1 << 20) -> str:
@@ -125,6 +100,15 @@ def gem(features: np.ndarray, p: float) -> np.ndarray:
     return (np.sign(m) * np.abs(m) ** (1.0 / p)).astype(np.float32)
 
 
+def gem_batch(features: torch.Tensor, p: float) -> torch.Tensor:
+    """``gem`` of each image's patches, on the device: (B, N, C) -> float32 (B, C)."""
+    with full_precision(features.device):
+        f = features.float()
+        powered = f.pow(p) if float(p).is_integer() else f.sign() * f.abs().pow(p)
+        m = powered.mean(dim=1)
+        return m.sign() * m.abs().pow(1.0 / p)
+
+
 def pca_project(vectors: np.ndarray, dim: int) -> np.ndarray:
     """Rows projected on their own top ``dim`` principal axes (at most n rows), L2-normalised."""
     x = vectors.astype(np.float64)
@@ -136,6 +120,25 @@ def pca_project(vectors: np.ndarray, dim: int) -> np.ndarray:
     vals, vecs = np.maximum(vals[order], 1e-12), vecs[:, order]
     axes = (x.T @ vecs) / np.sqrt(vals)          # (d, dim) unit principal axes
     return l2_normalize(x @ axes).astype(np.float32)
+
+
+def resolve_backbone(backbone: Optional[str], weights: Optional[str]) -> dinov2.Arch:
+    """The DINOv2 architecture to build: read from the ``weights`` file's tensor shapes when
+    ``backbone`` is not given (ViT-G/14 when neither is); a given ``backbone`` must agree with
+    the file."""
+    if weights is None:
+        return dinov2.get_arch(backbone or "vitg14")
+    path = Path(weights).expanduser()
+    if not path.is_file():
+        arch = dinov2.get_arch(backbone or "vitg14")
+        raise InputError(f"{path}: no such DINOv2 checkpoint file (expected {arch.checkpoint_name})")
+    found = dinov2.checkpoint_arch(path)
+    if backbone is not None:
+        asked = dinov2.get_arch(backbone)
+        if asked != found:
+            raise InputError(f"{path.name} holds DINOv2 {found.label}, but --backbone {backbone} asks "
+                             f"for {asked.label}: drop --backbone or use --backbone {found.key}")
+    return found
 
 
 # ---------------------------------------------------------------- vocabularies
@@ -190,11 +193,11 @@ def load_vocabulary(path: str | os.PathLike, k: Optional[int] = None, dim: Optio
 class _AnyLocBase(DescriptorModel):
     """DINOv2 patch features, batched, shared by AnyLoc-VLAD and AnyLoc-GeM."""
 
-    def __init__(self, backbone: str = "vitg14", weights: Optional[str] = None,
+    def __init__(self, backbone: Optional[str] = None, weights: Optional[str] = None,
                  allow_download: bool = False, layer: Optional[int] = None, facet: str = "value",
                  input_height: int = 224, batch_size: int = 4, device: str = "auto",
-                 pca_dim: Optional[int] = None) -> None:
-        self.arch = dinov2.get_arch(backbone)
+                 pca_dim: Optional[int] = None, precision: str = "auto") -> None:
+        self.arch = resolve_backbone(backbone, weights)
         self.layer = DEFAULT_LAYERS[self.arch.key.replace("_reg", "")] if layer is None else int(layer)
         if not 0 <= self.layer < self.arch.depth:
             raise InputError(f"{self.arch.label} has layers 0..{self.arch.depth - 1}, not {self.layer}")
@@ -210,6 +213,8 @@ class _AnyLocBase(DescriptorModel):
             raise InputError(f"PCA dimension must be at least 1, got {pca_dim}")
         self.pca_dim = None if pca_dim is None else int(pca_dim)
         self.device = pick_device(device)
+        self.precision = check_precision(precision)
+        self.dtype = resolve_precision(self.precision, self.device)
         self.allow_download = bool(allow_download)
         # Resolve the checkpoint now (fast, fails early); read it only when describing.
         self.weights_path = dinov2.find_checkpoint(self.arch, weights)
@@ -236,33 +241,15 @@ class _AnyLocBase(DescriptorModel):
 
     def patch_features(self, images: Iterable[np.ndarray], count: int,
                        progress: Optional[Progress], cancel: Optional[CancelToken],
-                       stage: str) -> Iterator[np.ndarray]:
-        """Unit patch features (h*w, C) float32 per image, computed ``batch_size`` at a time."""
+                       stage: str) -> Iterator[torch.Tensor]:
+        """Unit patch features, float32 (B, h*w, C) on the device, ``batch_size`` images at a time."""
         model = self.backbone()
-        batch: list[np.ndarray] = []
-        done = 0
-
-        def run(batch: list[np.ndarray]) -> np.ndarray:
-            x = torch.from_numpy(np.stack(batch)).to(self.device)
-            with torch.inference_mode():
-                feats = model.extract(x, self.layer, self.facet)
-                feats = F.normalize(feats.float(), dim=-1)
-            return feats.cpu().numpy()
-
-        report(progress, 0, count, stage)
-        for rgb in images:
-            batch.append(preprocess(rgb, self.input_height))
-            if len(batch) == self.batch_size:
-                check(cancel)
-                yield from run(batch)
-                done += len(batch)
-                batch = []
-                report(progress, done, count, stage)
-        if batch:
-            check(cancel)
-            yield from run(batch)
-            done += len(batch)
-            report(progress, done, count, stage)
+        for batch in in_batches(images, self.batch_size, count, progress, cancel, stage):
+            x = to_network_input(batch, (self.input_height, 2 * self.input_height), self.size,
+                                 self.device, "AnyLoc")
+            with compute(self.device, self.dtype):   # never yield inside: the context would leak
+                feats = F.normalize(model.extract(x, self.layer, self.facet).float(), dim=-1)
+            yield feats
 
     def _finish(self, rows: np.ndarray) -> np.ndarray:
         """Optional PCA, then float32 L2-normalised rows."""
@@ -273,7 +260,8 @@ class _AnyLocBase(DescriptorModel):
     def _common_settings(self) -> dict:
         return {"name": self.name, "backbone": self.arch.key, "weights": self.weights_identity(),
                 "layer": self.layer, "facet": self.facet, "input_size": list(self.size),
-                "pca_dim": self.pca_dim}
+                "pca_dim": self.pca_dim,
+                "precision": "float32" if self.dtype is None else str(self.dtype).removeprefix("torch.")}
 
 
 class AnyLocVLAD(_AnyLocBase):
@@ -283,13 +271,13 @@ class AnyLocVLAD(_AnyLocBase):
     # The paper's thresholds (METHOD.md): node_sim_th 0.80, loop_sim_th 0.55.
     defaults = {"node_sim_th": 0.80, "loop_sim_th": 0.55}
 
-    def __init__(self, backbone: str = "vitg14", weights: Optional[str] = None,
+    def __init__(self, backbone: Optional[str] = None, weights: Optional[str] = None,
                  allow_download: bool = False, layer: Optional[int] = None, facet: str = "value",
                  vocabulary: Optional[str] = "map", num_clusters: int = 32, input_height: int = 224,
                  batch_size: int = 4, device: str = "auto", pca_dim: Optional[int] = None,
-                 save_vocabulary: Optional[str] = None) -> None:
+                 save_vocabulary: Optional[str] = None, precision: str = "auto") -> None:
         super().__init__(backbone, weights, allow_download, layer, facet, input_height,
-                         batch_size, device, pca_dim)
+                         batch_size, device, pca_dim, precision)
         if int(num_clusters) < 1:
             raise InputError(f"number of clusters must be at least 1, got {num_clusters}")
         self.num_clusters = int(num_clusters)
@@ -297,6 +285,7 @@ class AnyLocVLAD(_AnyLocBase):
         self.centers: Optional[np.ndarray] = None
         self.vocabulary_id = "map"
         self._resolve_vocabulary(vocabulary or "map")
+        self.dtype = resolve_precision(self.precision, self.device, map_vocabulary=self.centers is None)
 
     def _resolve_vocabulary(self, vocabulary: str) -> None:
         """Load a vocabulary file, or a domain name from AnyLoc's cache; "map" builds one later."""
@@ -326,39 +315,30 @@ class AnyLocVLAD(_AnyLocBase):
     def describe(self, images: Iterable[np.ndarray], count: int,
                  progress: Optional[Progress] = None,
                  cancel: Optional[CancelToken] = None) -> np.ndarray:
-        features = self.patch_features(images, count, progress, cancel, "AnyLoc: DINOv2 features")
-        if self.centers is not None:
-            rows = [anyloc_vlad(f, self.centers) for f in features]
-        else:
-            # Map vocabulary: keep every image's features (float16 halves the memory), cluster a
-            # sample of them, then describe every image against the centres.
-            kept = [f.astype(np.float16) for f in features]
+        # VLAD runs on the device; a map vocabulary is clustered (float64, CPU) from a seeded
+        # sample of the first frames' features held on the host (bounded, see mapvocab).
+        batches = self.patch_features(images, count, progress, cancel, "AnyLoc: DINOv2 features")
+
+        def build(parts: list[np.ndarray]) -> np.ndarray:
             check(cancel)
             report(progress, 0, 1, "AnyLoc: vocabulary (k-means)")
-            self.centers = kmeans_cosine(self._vocabulary_sample(kept), self.num_clusters)
+            centers = kmeans_cosine(self._vocabulary_sample(parts), self.num_clusters)
             if self.save_vocabulary_to:
-                save_vocabulary(self.save_vocabulary_to, self.centers)
+                save_vocabulary(self.save_vocabulary_to, centers)
             report(progress, 1, 1, "AnyLoc: vocabulary (k-means)")
-            rows = []
-            for i, f in enumerate(kept):
-                rows.append(anyloc_vlad(l2_normalize(f.astype(np.float32)), self.centers))
-                if i % 64 == 63:
-                    check(cancel)
-                    report(progress, i + 1, len(kept), "AnyLoc: VLAD")
-            report(progress, len(kept), len(kept), "AnyLoc: VLAD")
-        out = np.stack(rows) if rows else np.zeros((0, self.output_dim), np.float32)
+            return centers
+
+        out, self.centers = pool_recording(batches, vlad_batch, self.device, centers=self.centers,
+                                           build=build, cancel=cancel)
+        if out is None:
+            out = np.zeros((0, self.output_dim), np.float32)
         return self._finish(out)
 
     @staticmethod
     def _vocabulary_sample(kept: list[np.ndarray]) -> np.ndarray:
-        total = sum(f.shape[0] for f in kept)
-        if total == 0:
+        if sum(f.size for f in kept) == 0:
             raise InputError("no images to build a map vocabulary from")
-        allf = np.concatenate(kept)
-        if total > MAX_VOCAB_FEATURES:
-            rng = np.random.default_rng(0)
-            allf = allf[np.sort(rng.choice(total, MAX_VOCAB_FEATURES, replace=False))]
-        return allf.astype(np.float32)
+        return sample_rows(kept, MAX_VOCAB_FEATURES, seed=0)
 
     def settings(self) -> dict:
         return {**self._common_settings(), "vocabulary": self.vocabulary_id,
@@ -374,14 +354,14 @@ class AnyLocGeM(_AnyLocBase):
     # keep the paper's "dense nodes, strict loops" intent and should be re-checked with weights.
     defaults = {"node_sim_th": 0.95, "loop_sim_th": 0.85}
 
-    def __init__(self, backbone: str = "vitg14", weights: Optional[str] = None,
+    def __init__(self, backbone: Optional[str] = None, weights: Optional[str] = None,
                  allow_download: bool = False, layer: Optional[int] = None, facet: str = "value",
                  input_height: int = 224, batch_size: int = 4, device: str = "auto",
                  pca_dim: Optional[int] = None, gem_p: float = 3.0, vocabulary: Optional[str] = None,
-                 num_clusters: Optional[int] = None) -> None:
+                 num_clusters: Optional[int] = None, precision: str = "auto") -> None:
         # vocabulary / num_clusters are accepted (the CLI passes one option set) and ignored.
         super().__init__(backbone, weights, allow_download, layer, facet, input_height,
-                         batch_size, device, pca_dim)
+                         batch_size, device, pca_dim, precision)
         if float(gem_p) <= 0:
             raise InputError(f"GeM power must be positive, got {gem_p}")
         self.gem_p = float(gem_p)
@@ -389,9 +369,9 @@ class AnyLocGeM(_AnyLocBase):
     def describe(self, images: Iterable[np.ndarray], count: int,
                  progress: Optional[Progress] = None,
                  cancel: Optional[CancelToken] = None) -> np.ndarray:
-        rows = [gem(f, self.gem_p)
+        rows = [gem_batch(f, self.gem_p).cpu().numpy()
                 for f in self.patch_features(images, count, progress, cancel, "AnyLoc-GeM: DINOv2 features")]
-        out = np.stack(rows) if rows else np.zeros((0, self.dim), np.float32)
+        out = np.concatenate(rows) if rows else np.zeros((0, self.dim), np.float32)
         return self._finish(out)
 
     def settings(self) -> dict:

@@ -9,20 +9,27 @@ still load (``columns`` is then None).
 Added key (optional): ``colours`` float16 (n, 512), the colour histogram of each frame's
 horizon band (``engine.colour``), evidence of the ``verified`` method for revisits with a
 lateral offset. Files without it still load (``colours`` is then None).
+Added keys (optional, together): ``feat_offsets`` int64 (n + 1,), ``feat_uv`` float16 (N, 2),
+``feat_desc`` uint8 (N, 128): the local features of every shifted frame
+(``engine.features.FeatureTable``; frame i owns rows ``feat_offsets[i]:feat_offsets[i + 1]``,
+uv are column/row fractions of the frame) for two-view geometry (``engine.sphere``).
+Files without them still load (``features`` is then None).
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, Iterator, Optional
 
 import numpy as np
 
 from ..errors import InputError
-from ..progress import CancelToken, Progress
+from ..features import FeatureTable
+from ..progress import CancelToken, Progress, check, report
 
 
 @dataclass
@@ -34,6 +41,10 @@ class Descriptors:
     meta: dict = field(default_factory=dict)  # descriptor name, settings, source...
     columns: Optional[np.ndarray] = None  # float16 (n, W', F) column signatures, when computed
     colours: Optional[np.ndarray] = None  # float16 (n, 512) horizon-band colour histograms, when computed
+    features: Optional[FeatureTable] = None  # local features of each shifted frame, when computed
+    # Derived results kept in memory (retrieval, background statistics, geometry per frame
+    # pair), so that re-mapping after a threshold change is cheap; never saved.
+    cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
@@ -41,27 +52,32 @@ class Descriptors:
     def optional_arrays(self) -> dict:
         """The added, optional .npz keys that are set (for writers of the file)."""
         extra = {"columns": self.columns, "colours": self.colours}
-        return {k: np.asarray(v, np.float16) for k, v in extra.items() if v is not None}
+        out = {k: np.asarray(v, np.float16) for k, v in extra.items() if v is not None}
+        if self.features is not None:
+            out.update(self.features.to_arrays())
+        return out
 
     def save(self, path: str | Path, vector_dtype=np.float32) -> None:
         """Write the .npz atomically. ``vector_dtype`` float16 halves a cache file; the
         contract's files (``panotopo describe``) keep float32."""
-        path = Path(path)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez(
-            tmp,
+        from ..outputs import write_atomically  # random temp name, umask mode, atomic
+
+        write_atomically(path, lambda f: np.savez(
+            f,
             stamps=np.asarray(self.stamps, np.float64),
             frames=np.asarray(self.frames, np.int64),
             shifts=np.asarray(self.shifts, np.int64),
             descriptors=np.asarray(self.vectors, vector_dtype),
             meta=np.array(json.dumps(self.meta)),
             **self.optional_arrays(),
-        )
-        tmp.replace(path)  # atomic: a crash never leaves half a file
+        ))
 
     @classmethod
     def load(cls, path: str | Path) -> "Descriptors":
+        from ..npz_guard import check_archive, check_contents
+
         path = Path(path)
+        check_archive(path)  # a zip bomb or a lying header is refused before loading
         try:
             with np.load(path, allow_pickle=False) as z:
                 missing = {"stamps", "frames", "shifts", "descriptors", "meta"} - set(z.files)
@@ -76,6 +92,11 @@ class Descriptors:
                     columns=z["columns"].astype(np.float16) if "columns" in z.files else None,
                     colours=z["colours"].astype(np.float16) if "colours" in z.files else None,
                 )
+                try:
+                    d.features = FeatureTable.from_arrays({k: z[k] for k in z.files if k.startswith("feat_")},
+                                                          frames=len(d.stamps))
+                except InputError as exc:
+                    raise InputError(f"{path}: {exc}") from None
         except InputError:
             raise
         except FileNotFoundError:
@@ -89,7 +110,27 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
         if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape[0] != n):
             raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
+        check_contents(d, path)
         return d
+
+
+def in_batches(images: Iterable[np.ndarray], batch_size: int, count: int, progress: Optional[Progress],
+               cancel: Optional[CancelToken], stage: str) -> Iterator[list[np.ndarray]]:
+    """``images`` in lists of ``batch_size`` (the last may be shorter): cancel checked before
+    each list, progress ``stage`` reported once the caller has used it."""
+    done = 0
+    batch: list[np.ndarray] = []
+    report(progress, 0, count, stage)
+    for rgb in itertools.chain(images, [None]):
+        if rgb is not None:
+            batch.append(rgb)
+        if not batch or (rgb is not None and len(batch) < batch_size):
+            continue
+        check(cancel)
+        yield batch
+        done += len(batch)
+        batch = []
+        report(progress, done, max(count, done), stage)
 
 
 class DescriptorModel(ABC):

@@ -286,42 +286,91 @@ def missing_weights_message(arch: Arch) -> str:
             f"{hub_checkpoint_dir()} or pass --weights FILE (see docs/anyloc.md)")
 
 
-def _guess_arch(state: dict) -> Optional[Arch]:
-    """The architecture a state dict looks like (by width, depth and registers), if any."""
+def arch_of_state(state: dict, prefix: str = "") -> Optional[Arch]:
+    """The architecture of the DINOv2 weights under ``prefix`` in ``state``, read from tensor
+    shapes: a known backbone when width, depth and registers match one, else a custom one
+    (64 channels per head, as every DINOv2 size has; used for tiny test models). None if the
+    entries are not a DINOv2 layout."""
+    sub = {k[len(prefix):]: v for k, v in state.items() if k.startswith(prefix)}
+    sizes = _sizes(sub)
+    if sizes is None or sizes[0] % 64:
+        return None
+    known = _guess_arch(sub)
+    if known is not None:
+        return known
+    dim, depth, regs = sizes
+    ffn = "swiglu" if "blocks.0.mlp.w12.weight" in sub else "mlp"
+    return Arch(f"custom{dim}x{depth}", f"ViT-{dim}x{depth}/14", dim, depth, dim // 64, ffn, regs)
+
+
+def _sizes(state: dict) -> Optional[tuple[int, int, int]]:
+    """(width, depth, register tokens) of a DINOv2 state dict, or None if it is not one."""
     try:
         dim = int(state["cls_token"].shape[-1])
         depth = 1 + max(int(k.split(".")[1]) for k in state if k.startswith("blocks."))
-    except (KeyError, ValueError, IndexError, AttributeError):
+    except (KeyError, ValueError, IndexError, AttributeError, TypeError):
         return None
     regs = int(state["register_tokens"].shape[1]) if "register_tokens" in state else 0
+    return dim, depth, regs
+
+
+def _guess_arch(state: dict) -> Optional[Arch]:
+    """The architecture a state dict looks like (by width, depth and registers), if any."""
+    sizes = _sizes(state)
     for arch in ARCHS.values():
-        if (arch.embed_dim, arch.depth, arch.registers) == (dim, depth, regs):
+        if (arch.embed_dim, arch.depth, arch.registers) == sizes:
             return arch
     return None
+
+
+def layout_problem(model: nn.Module, state: dict, optional: tuple[str, ...] = ()) -> Optional[str]:
+    """The first missing, wrongly shaped or unexpected entry of ``state`` against ``model``'s
+    state dict ("X is missing", "X has shape ..., expected ..."), or None if they match.
+    ``optional`` keys may be absent."""
+    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+    for key, shape in expected.items():
+        if key not in state:
+            if key in optional:
+                continue
+            return f"{key} is missing"
+        got = tuple(getattr(state[key], "shape", ()))
+        if got != shape:
+            return f"{key} has shape {got}, expected {shape}"
+    extra = sorted(set(state) - set(expected))
+    return f"unexpected entry {extra[0]}" if extra else None
 
 
 def check_state_dict(model: DinoVisionTransformer, state: dict, where: str) -> None:
     """Raise InputError naming the expected architecture unless keys and shapes match exactly."""
     arch = model.arch
-    expected = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-    problem = None
-    for key, shape in expected.items():
-        if key not in state:
-            problem = f"{key} is missing"
-            break
-        got = tuple(getattr(state[key], "shape", ()))
-        if got != shape:
-            problem = f"{key} has shape {got}, expected {shape}"
-            break
-    if problem is None:
-        extra = sorted(set(state) - set(expected))
-        if extra:
-            problem = f"unexpected entry {extra[0]}"
+    problem = layout_problem(model, state)
     if problem is None:
         return
     guess = _guess_arch(state)
     hint = f"; it looks like {guess.label}: use --backbone {guess.key}" if guess and guess != arch else ""
     raise InputError(f"{where}: not a DINOv2 {arch.label} checkpoint ({problem}){hint}")
+
+
+def checkpoint_arch(path: str | os.PathLike) -> Arch:
+    """The DINOv2 backbone a checkpoint holds, from its tensor shapes alone: width
+    (``cls_token``), depth (highest ``blocks.N``) and register tokens. The file is memory-mapped,
+    so even ViT-G/14's 4.5 GB are not read. InputError if it matches no known backbone."""
+    path = Path(path).expanduser()
+    try:
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        except RuntimeError:   # the legacy (pre-zip) format cannot be memory-mapped
+            state = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such DINOv2 checkpoint file") from None
+    except Exception as exc:
+        raise InputError(f"{path}: cannot read the DINOv2 checkpoint, the file is truncated or not "
+                         f"a PyTorch checkpoint ({exc.__class__.__name__})") from None
+    arch = _guess_arch(state) if isinstance(state, dict) else None
+    if arch is None:
+        raise InputError(f"{path}: not a DINOv2 checkpoint of a known backbone (ViT-S/B/L/G/14, "
+                         f"with or without registers); cannot tell its backbone from its tensors")
+    return arch
 
 
 def read_checkpoint(path: Path, arch: Arch) -> dict:
@@ -352,8 +401,9 @@ def load_dinov2(backbone: str, weights: Optional[str | os.PathLike] = None,
         if not allow_download:
             raise InputError(missing_weights_message(arch))
         try:
+            # weights_only: a downloaded file is data, never code (issue 16, finding 8).
             state = torch.hub.load_state_dict_from_url(arch.url, map_location="cpu",
-                                                       file_name=arch.checkpoint_name)
+                                                       file_name=arch.checkpoint_name, weights_only=True)
         except Exception as exc:
             raise InputError(f"cannot download {arch.checkpoint_name} ({exc.__class__.__name__}): "
                              f"{missing_weights_message(arch)}") from None

@@ -21,27 +21,29 @@ torch is imported lazily so that the registry and ``defaults`` stay cheap.
 from __future__ import annotations
 
 import contextlib
+import copy
 import hashlib
 import io
 import threading
-from typing import Iterable, Optional
+from typing import Iterable, Iterator, Optional
 
-import cv2
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..errors import InputError
 from ..progress import CancelToken, Progress, check, report
-from .base import DescriptorModel
+from .base import DescriptorModel, in_batches
 from .vlad import _assign, kmeans_cosine, l2_normalize, vlad
 
-IMAGENET_MEAN = np.array([0.485, 0.456, 0.406], dtype=np.float32)
-IMAGENET_STD = np.array([0.229, 0.224, 0.225], dtype=np.float32)
+if TYPE_CHECKING:
+    import torch
 
 # Local feature stages (index of the last block run, channels), both at stride 16.
 STAGES = {"block7": (7, 80), "block10": (10, 112)}
 # Local features sampled for the vocabulary (k-means cost grows with it; 100k is plenty for k=32).
 VOCAB_SAMPLE = 100_000
-VERSION = 2  # bump when the computation changes, so caches are invalidated
+VERSION = 3  # bump when the computation changes, so caches are invalidated
 # Spatial layouts of the pooled vector (see the module docstring).
 LAYOUTS = ("global", "sectors")
 # Sector windows: raised cosine of this half-width in degrees (neighbouring sectors of
@@ -53,6 +55,7 @@ GLOBAL_WEIGHT = 0.5
 
 _model = None
 _model_lock = threading.Lock()
+_device_models: dict = {}   # device name -> a copy of the backbone on that device
 
 
 def load_backbone():
@@ -147,6 +150,7 @@ class EfficientNetVLAD(DescriptorModel):
         seed: int = 0,
         layout: str = "global",
         sectors: int = 4,
+        precision: str = "auto",
     ) -> None:
         if layout not in LAYOUTS:
             raise InputError(f"effnet-vlad: unknown layout '{layout}'; choose one of: {', '.join(LAYOUTS)}")
@@ -161,7 +165,12 @@ class EfficientNetVLAD(DescriptorModel):
         self.vocabulary_size = int(vocabulary_size)
         self.input_height = int(input_height)
         self.batch_size = int(batch_size)
-        self.device = device
+        # CPU by default: the calibration ran there, and the model is small (see docs/gpu.md).
+        from .accel import check_precision, pick_device, resolve_precision
+
+        self.device = pick_device(device)
+        self.precision = check_precision(precision)
+        self.dtype = resolve_precision(self.precision, self.device, map_vocabulary=vocabulary is None)
         self.stage = stage
         self.threads = threads
         self.seed = int(seed)
@@ -208,33 +217,45 @@ class EfficientNetVLAD(DescriptorModel):
             "vocabulary": vocab,
             "seed": self.seed,
             "layout": self.layout,
+            # Autocast changes the numbers (within the tolerances of docs/gpu.md); the device does not.
+            "precision": "float32" if self.dtype is None else str(self.dtype).removeprefix("torch."),
             **({"sectors": self.sectors, "sector_halfwidth_deg": SECTOR_HALFWIDTH_DEG,
                 "global_weight": GLOBAL_WEIGHT} if self.layout == "sectors" else {}),
         }
 
-    # -- local features -------------------------------------------------------------
-    def _prepare(self, rgb: np.ndarray) -> np.ndarray:
-        if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3:
-            raise InputError(f"effnet-vlad: expected an H x W x 3 RGB image, got shape {getattr(rgb, 'shape', None)}")
-        img = cv2.resize(rgb, (self.input_width, self.input_height), interpolation=cv2.INTER_AREA)
-        img = (img.astype(np.float32) / 255.0 - IMAGENET_MEAN) / IMAGENET_STD
-        return img.transpose(2, 0, 1)
-
-    def local_features(self, batch: list[np.ndarray]) -> np.ndarray:
-        """L2-normalised local features, float32 (B, positions, C), of a batch of RGB images."""
-        import torch
-
+    # -- local features ---------------------------------------------------------------
+    def network(self):
+        """The backbone on this model's device (one copy per device, the CPU one shared)."""
         model = load_backbone()
-        x = torch.from_numpy(np.stack([self._prepare(im) for im in batch])).to(self.device)
-        if self.device != "cpu":
-            model = model.to(self.device)
-        with torch.inference_mode():
+        if self.device.type == "cpu":
+            return model
+        with _model_lock:
+            key = str(self.device)
+            if key not in _device_models:
+                _device_models[key] = copy.deepcopy(model).to(self.device)
+            return _device_models[key]
+
+    def local_features(self, batch: list[np.ndarray]) -> torch.Tensor:
+        """L2-normalised local features, float32 (B, positions, C) on the device, of RGB images."""
+        import torch.nn.functional as F
+
+        from .accel import compute, to_network_input
+
+        model = self.network()
+        size = (self.input_height, self.input_width)
+        x = to_network_input(batch, size, size, self.device, "effnet-vlad")
+        with compute(self.device, self.dtype):
             # Same order as EfficientNet.extract_features: stem conv, BN, activation, blocks.
             y = model._swish(model._bn0(model._conv_stem(x)))
             for block in model._blocks[: self.last_block + 1]:
                 y = block(y)
-            feats = torch.nn.functional.normalize(y.flatten(2).transpose(1, 2), dim=-1)
-        return feats.float().cpu().numpy()
+            return F.normalize(y.float().flatten(2).transpose(1, 2), dim=-1)
+
+    def feature_batches(self, images: Iterable[np.ndarray], count: int, progress: Optional[Progress],
+                        cancel: Optional[CancelToken]) -> Iterator[torch.Tensor]:
+        """``local_features`` of ``batch_size`` images at a time, with progress and cancel checks."""
+        for batch in in_batches(images, self.batch_size, count, progress, cancel, "describe"):
+            yield self.local_features(batch)
 
     # -- description ----------------------------------------------------------------
     def describe(
@@ -246,55 +267,41 @@ class EfficientNetVLAD(DescriptorModel):
     ) -> np.ndarray:
         import torch
 
+        from .mapvocab import pool_recording
+
         if self.threads:
             torch.set_num_threads(int(self.threads))
-        # Pass 1: local features of every image, kept as float16 (392 x 112 x 2 bytes per image).
-        local: list[np.ndarray] = []
-        batch: list[np.ndarray] = []
-        report(progress, 0, count, "describe")
-
-        def flush() -> None:
-            check(cancel)
-            local.extend(f.astype(np.float16) for f in self.local_features(batch))
-            batch.clear()
-            report(progress, len(local), max(count, len(local)), "describe")
-
-        for rgb in images:
-            batch.append(rgb)
-            if len(batch) == self.batch_size:
-                flush()
-        if batch:
-            flush()
+        # Vocabulary: the given one, or spherical k-means on this recording's own features
+        # (host memory bounded, see engine.descriptors.mapvocab).
+        rows, centers = pool_recording(
+            self.feature_batches(images, count, progress, cancel), self.pool_batch, self.device,
+            centers=self.vocabulary if self.fixed_vocabulary else None,
+            build=self.build_vocabulary, cancel=cancel)
         check(cancel)
-        if not local:
+        if rows is None:
             return np.zeros((0, self.dimension), dtype=np.float32)
-        # Vocabulary: the given one, or spherical k-means on this recording's own features.
-        if not self.fixed_vocabulary:
-            self.vocabulary = self.build_vocabulary(local)
-        centers = self.vocabulary
-        out = np.empty((len(local), self.dimension), dtype=np.float32)
-        for i, f in enumerate(local):
-            if i % 64 == 0:
-                check(cancel)
-            out[i] = self.pool(l2_normalize(f.astype(np.float32)), centers)
-        return out
+        self.vocabulary = centers
+        return rows
 
-    def pool(self, features: np.ndarray, centers: np.ndarray) -> np.ndarray:
-        """One image's vector from its L2-normalised local features, in this model's layout."""
+    def pool_batch(self, features: torch.Tensor, centers: torch.Tensor) -> torch.Tensor:
+        """Rows (B, dimension) from unit local features (B, positions, C), in this model's layout."""
+        import torch
+
+        from .vlad_torch import sector_vlad_batch, vlad_batch
+
         if self.layout == "global":
-            return vlad(features, centers)
-        if features.shape[0] % self.feature_width:
-            raise InputError(f"effnet-vlad: {features.shape[0]} local features do not fill rows of "
-                             f"{self.feature_width}")
-        return sector_vlad(features, centers, self.feature_width, self.sectors)
+            return vlad_batch(features, centers)
+        positions = features.shape[1]
+        if positions % self.feature_width:
+            raise InputError(f"effnet-vlad: {positions} local features do not fill rows of {self.feature_width}")
+        w = sector_weights(self.feature_width, self.sectors)[:, np.arange(positions) % self.feature_width]
+        return sector_vlad_batch(features, centers, torch.from_numpy(w), GLOBAL_WEIGHT)
 
     def build_vocabulary(self, local: list[np.ndarray]) -> np.ndarray:
         """k-means (cosine) centres from a deterministic sample of the local features."""
-        feats = np.concatenate(local, axis=0)
-        rng = np.random.default_rng(self.seed)
-        if feats.shape[0] > VOCAB_SAMPLE:
-            feats = feats[np.sort(rng.choice(feats.shape[0], VOCAB_SAMPLE, replace=False))]
-        feats = feats.astype(np.float32)
+        from .mapvocab import sample_rows
+
+        feats = sample_rows(local, VOCAB_SAMPLE, self.seed)
         if feats.shape[0] < self.vocabulary_size:
             raise InputError(
                 f"effnet-vlad: too few local features ({feats.shape[0]}) for {self.vocabulary_size} clusters"

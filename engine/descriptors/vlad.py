@@ -32,23 +32,25 @@ def _assign(features: np.ndarray, centers: np.ndarray) -> tuple[np.ndarray, np.n
     """Index of the most similar centre (argmax dot) and that similarity, per row."""
     n = features.shape[0]
     labels = np.empty(n, dtype=np.int64)
-    best = np.empty(n, dtype=np.float32)
+    best = np.empty(n, dtype=centers.dtype)
     for start in range(0, n, CHUNK):
-        sims = features[start:start + CHUNK] @ centers.T
+        sims = features[start:start + CHUNK].astype(centers.dtype) @ centers.T
         labels[start:start + CHUNK] = np.argmax(sims, axis=1)
         best[start:start + CHUNK] = sims[np.arange(sims.shape[0]), labels[start:start + CHUNK]]
     return labels, best
 
 
 def _cluster_sums(features: np.ndarray, labels: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cluster sum of rows and row count, in chunks (one-hot matrix product per chunk)."""
+    """Per-cluster sum of rows (float64) and row count, in chunks (rows sorted by cluster, summed
+    per run: O(N C), where a one-hot product costs O(N C k))."""
     counts = np.bincount(labels, minlength=k)
     sums = np.zeros((k, features.shape[1]), dtype=np.float64)
     for start in range(0, features.shape[0], CHUNK):
         part = labels[start:start + CHUNK]
-        onehot = np.zeros((k, part.size), dtype=np.float32)
-        onehot[part, np.arange(part.size)] = 1.0
-        sums += onehot @ features[start:start + CHUNK]
+        order = np.argsort(part, kind="stable")
+        present = np.unique(part)
+        runs = np.searchsorted(part[order], present)
+        sums[present] += np.add.reduceat(features[start:start + CHUNK][order].astype(np.float64), runs, axis=0)
     return sums, counts
 
 
@@ -77,21 +79,30 @@ def kmeans_cosine(features: np.ndarray, k: int, iters: int = 30, seed: int = 0) 
     is the normalised mean of its rows. Seeding is k-means++ on a random subset,
     deterministic from ``seed``. An empty cluster is re-seeded with the row that is
     worst represented by its current centre.
+
+    Computed in float64 on the CPU whatever device made the features: the result then
+    depends only on the input rows and the seed, not on BLAS kernels, thread counts or a
+    GPU's reduction order (a float32 run on CUDA gave other centres, issue 15). The
+    inputs are at most a 100k-row sample, so this costs seconds.
     """
-    x = np.asarray(features, dtype=np.float32)
+    x = np.asarray(features)
     if x.ndim != 2:
         raise InputError(f"k-means needs a 2-D array of features, got shape {x.shape}")
     if k < 1:
         raise InputError(f"k-means needs at least one cluster, got k={k}")
     if x.shape[0] < k:
         raise InputError(f"k-means with {k} clusters needs at least {k} features, got {x.shape[0]}")
-    x = l2_normalize(x).astype(np.float32)
+    # Unit rows stored as float32 (a 100k x 1536 sample stays 0.6 GB); every product and
+    # sum below is taken in float64, chunk by chunk.
+    x = np.asarray(x, dtype=np.float32)
+    norms = np.sqrt(np.einsum("ij,ij->i", x, x, dtype=np.float64))
+    x = x * (1.0 / np.maximum(norms, 1e-12)).astype(np.float32)[:, None]
     rng = np.random.default_rng(seed)
     if x.shape[0] > SEED_SAMPLE:
         sample = x[np.sort(rng.choice(x.shape[0], SEED_SAMPLE, replace=False))]
     else:
         sample = x
-    centers = _seed_plus_plus(sample, k, rng)
+    centers = _seed_plus_plus(sample.astype(np.float64), k, rng)
     labels = None
     for _ in range(iters):
         new_labels, best = _assign(x, centers)
@@ -100,12 +111,12 @@ def kmeans_cosine(features: np.ndarray, k: int, iters: int = 30, seed: int = 0) 
         if empty.size:
             # Worst-represented rows become the new centres of the empty clusters.
             worst = np.argsort(best, kind="stable")[: empty.size]
-            sums[empty] = x[worst]
-        centers = l2_normalize(sums).astype(np.float32)
+            sums[empty] = x[worst].astype(np.float64)
+        centers = l2_normalize(sums)
         if labels is not None and empty.size == 0 and np.array_equal(labels, new_labels):
             break
         labels = new_labels
-    return centers
+    return centers.astype(np.float32)
 
 
 def vlad(features: np.ndarray, centers: np.ndarray) -> np.ndarray:

@@ -6,6 +6,9 @@
 - a ``.bag`` file (ROS1), a bare ``.db3`` or ``.mcap`` file  -> BagSource
 - a directory with metadata.yaml or a .db3/.mcap file (ROS2) -> BagSource
 - any other directory                                       -> FolderSource of images
+
+``recording_poses`` gives the positions a recording carries itself: today the EXIF
+GPS fixes of a photo folder (``folder.py``), as ``engine.poses.Poses`` on its stamps.
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ from typing import Optional
 
 from ..errors import InputError
 from ..frames import FrameSource
-from .folder import FolderSource
+from ..poses import Poses
+from .folder import FolderSource, folder_layout
 from .poses import read_poses
 from .rosbag import BagSource, is_ros2_bag_dir, list_image_topics, list_pose_topics
 from .video import VIDEO_SUFFIXES, VideoSource
@@ -27,6 +31,7 @@ __all__ = [
     "list_image_topics",
     "list_pose_topics",
     "open_recording",
+    "recording_poses",
     "read_poses",
 ]
 
@@ -54,3 +59,13 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
         f"{path}: unsupported file type {suffix or '(none)'!r}; expected a video, "
         f"a ROS1 .bag, a ROS2 bag (directory, .db3 or .mcap) or a folder of images"
     )
+
+
+def recording_poses(path: Path, interval: float = 1.0) -> tuple[Optional[Poses], list[str]]:
+    """(positions, warnings) of a photo folder with EXIF GPS on every photo; (None, [])
+    for any other recording. Reads tags only, no pixels."""
+    path = Path(path)
+    if not path.is_dir() or is_ros2_bag_dir(path):
+        return None, []
+    layout = folder_layout(path, interval=interval)
+    return layout.poses, layout.warnings

@@ -18,21 +18,41 @@ Stamps come from an optional ``stamps.csv`` in the folder, in one of two forms:
 
    Every image must have a row and every row must name an image of the folder.
 
-Blank lines are ignored. Stamps must not decrease in name order. Without
-stamps.csv the stamp of frame ``i`` is ``i * interval`` (interval given when
-opening, default 1.0 s).
+Blank lines are ignored. Stamps must not decrease in name order.
+
+Without stamps.csv, photos that ALL carry an EXIF capture time (DateTimeOriginal,
+with SubSecTimeOriginal and OffsetTimeOriginal when present; see ``exif.py``) are
+ordered by that time (name order among equal times) and stamped in seconds from the
+first photo. Otherwise (any photo without a readable time) the order is the name
+order and the stamp of frame ``i`` is ``i * interval`` (interval given when opening,
+default 1.0 s).
+
+Positions: when EVERY photo has an EXIF GPS fix, ``FolderSource.poses`` holds them as
+``engine.poses.Poses`` on the frames' stamps: metres east (x) and north (y) of the first
+photo's fix (``geo.local_metres``), with yaw from GPSImgDirection when every photo has
+one. Otherwise ``poses`` is None (no partial tracks). Malformed tags are skipped with a
+line in ``FolderSource.warnings``. ``panotopo map`` stores these positions as node ``x``,
+``y`` unless ``--poses`` is given, e.g. for five GoPro MAX photos walking 9 m north::
+
+    panotopo map ../shared/data/real/panoramax-gopromax -o gopro.graphml
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Optional
 
 import cv2
 import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular
+from ..poses import Poses
+from ..validate import frame_size, image_file_size
+from .exif import PhotoTags, read_photo_tags
+from .geo import heading_to_yaw, local_metres
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 STAMPS_FILE = "stamps.csv"
@@ -93,29 +113,78 @@ def _float(text: str, where: str, line: int) -> float:
     return value
 
 
+def gps_poses(tags: list[PhotoTags], stamps: np.ndarray) -> Optional[Poses]:
+    """Local metres of the photos' GPS fixes on ``stamps``; None unless every photo has one."""
+    if not tags or not all(t.has_fix for t in tags):
+        return None
+    lat = np.array([t.latitude for t in tags])
+    lon = np.array([t.longitude for t in tags])
+    x, y = local_metres(lat, lon, float(lat[0]), float(lon[0]))
+    yaw = None
+    if all(t.direction is not None for t in tags):
+        yaw = heading_to_yaw(np.array([t.direction for t in tags]))
+    return Poses(t=np.asarray(stamps, dtype=np.float64).copy(), x=x, y=y, yaw=yaw)
+
+
+@dataclass
+class FolderLayout:
+    """A photo folder's frame order, stamps and (GPS) positions, from names, stamps.csv and EXIF."""
+
+    files: list[Path]
+    stamps: np.ndarray
+    poses: Optional[Poses]
+    warnings: list[str]
+
+
+def folder_layout(folder: Path, interval: float = 1.0) -> FolderLayout:
+    """Order, stamps and positions of the images in ``folder`` (module doc); reads no pixels."""
+    files = image_files(folder)
+    if not files:
+        raise InputError(f"{folder}: folder has no images "
+                         f"({', '.join(s[1:] for s in IMAGE_SUFFIXES)})")
+    tags = [read_photo_tags(f) for f in files]
+    warnings = [w for t in tags for w in t.warnings]
+    csv_path = folder / STAMPS_FILE
+    if csv_path.exists():
+        stamps = read_stamps_csv(csv_path, [p.name for p in files])
+    elif all(t.time is not None for t in tags):
+        order = sorted(range(len(files)), key=lambda i: tags[i].time)  # stable: name order on ties
+        files, tags = [files[i] for i in order], [tags[i] for i in order]
+        times = np.array([t.time for t in tags], dtype=np.float64)
+        stamps = times - times[0]
+    else:
+        if interval <= 0:
+            raise InputError(f"{folder}: interval must be positive, got {interval}")
+        stamps = np.arange(len(files), dtype=np.float64) * float(interval)
+        if any(t.time is not None for t in tags):
+            warnings.append(f"{folder}: not every image has an EXIF capture time: name order, "
+                            f"stamps every {interval:g} s")
+    poses = gps_poses(tags, stamps)
+    if poses is None and any(t.has_fix for t in tags):
+        warnings.append(f"{folder}: not every image has a GPS fix: no positions")
+    return FolderLayout(files, stamps, poses, warnings)
+
+
 class FolderSource(IndexedSource):
-    """Image files of a folder, in natural name order."""
+    """Image files of a folder, in EXIF time order or natural name order (module doc)."""
 
     def __init__(self, path: str | Path, interval: float = 1.0) -> None:
         self.path = Path(path)
         if not self.path.is_dir():
             raise InputError(f"{self.path}: no such folder")
-        self.files = image_files(self.path)
-        if not self.files:
-            raise InputError(f"{self.path}: folder has no images "
-                             f"({', '.join(s[1:] for s in IMAGE_SUFFIXES)})")
-        csv_path = self.path / STAMPS_FILE
-        if csv_path.exists():
-            self._stamps = read_stamps_csv(csv_path, [p.name for p in self.files])
-        else:
-            if interval <= 0:
-                raise InputError(f"{self.path}: interval must be positive, got {interval}")
-            self._stamps = np.arange(len(self.files), dtype=np.float64) * float(interval)
+        layout = folder_layout(self.path, interval)
+        self.files = layout.files
+        self._stamps = layout.stamps
+        self.poses: Optional[Poses] = layout.poses
+        self.warnings: list[str] = layout.warnings
         first = self._read(0)
         self._resolution = (first.shape[1], first.shape[0])
 
     def _read(self, index: int) -> np.ndarray:
         file = self.files[index]
+        size = image_file_size(file)  # from the header: refuse a huge image before decoding it
+        if size is not None:
+            frame_size(*size, str(file))
         bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
         if bgr is None:
             raise InputError(f"{file}: unreadable or corrupt image")

@@ -15,6 +15,8 @@ time window.
 
 from __future__ import annotations
 
+import dataclasses
+import io
 import struct
 import threading
 from pathlib import Path
@@ -25,6 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
+from ..validate import frame_size, image_file_size
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = (
@@ -76,7 +79,7 @@ def open_bag(path: Path) -> Any:
         reader = AnyReader([target])
         reader.open()
     except Exception as err:  # rosbags raises many types for corrupt files
-        raise InputError(f"{path}: unreadable ROS bag ({_one_line(err)})") from None
+        raise InputError(f"{path}: unreadable ROS bag ({_one_line(err)}); {recovery_hint(Path(path))}") from None
     return reader
 
 
@@ -171,12 +174,60 @@ def message_to_rgb(msg: Any, msgtype: str) -> np.ndarray:
             if img.shape[2] == 4:
                 return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
             return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        rgb = message_to_cvimage(msg, "rgb8")
+        rgb = message_to_cvimage(unpadded(msg), "rgb8")
         return np.ascontiguousarray(rgb, dtype=np.uint8)
     except AssertionError:  # rosbags-image asserts on undecodable compressed data
         raise ValueError("not a decodable JPEG/PNG image") from None
     except (ImageError, cv2.error, TypeError) as err:
         raise ValueError(_one_line(err)) from None
+
+
+def unpadded(msg: Any) -> Any:
+    """An Image message whose rows are exactly width x pixel bytes long.
+
+    ``step`` is the length of a row in bytes; drivers pad rows to an alignment (e.g. 64
+    bytes), and rosbags-image reads the data as if there were no padding, which shears
+    the picture. Rows are taken ``step`` bytes apart and their first width x channels x
+    bytes-per-channel bytes kept. A step shorter than a row, or data shorter than the
+    rows it announces, is refused (ValueError)."""
+    from rosbags.image.image import to_cvtype
+
+    _, _, typestr, channels = to_cvtype(msg.encoding)
+    width, height, step = int(msg.width), int(msg.height), int(msg.step)
+    row = width * channels * np.dtype(typestr).itemsize
+    rows = height * 3 // 2 if msg.encoding in ("nv12", "nv21") else height  # + chroma rows
+    data = np.frombuffer(msg.data, dtype=np.uint8) if not isinstance(msg.data, np.ndarray) \
+        else msg.data.view(np.uint8).reshape(-1)
+    if step < row:
+        raise ValueError(f"row step of {step} bytes is shorter than a row of {width} {msg.encoding} "
+                         f"pixels ({row} bytes)")
+    if rows and data.size < step * (rows - 1) + row:
+        raise ValueError(f"{data.size} bytes of data for {rows} rows of {step} bytes")
+    if step == row:
+        return msg
+    packed = np.lib.stride_tricks.as_strided(data, shape=(rows, row), strides=(step, 1))
+    return dataclasses.replace(msg, data=np.ascontiguousarray(packed).reshape(-1), step=row)
+
+
+def message_size(msg: Any, msgtype: str) -> Optional[tuple[int, int]]:
+    """(width, height) announced by a message, read before decoding: the Image fields,
+    or a CompressedImage's JPEG/PNG header (None when the header cannot be read)."""
+    if msgtype != "sensor_msgs/msg/CompressedImage":
+        return int(msg.width), int(msg.height)
+    return image_file_size(io.BytesIO(bytes(msg.data)))
+
+
+def recovery_hint(path: Path) -> str:
+    """How to rebuild the index of a bag that was cut short (a recorder killed mid-write)."""
+    target = path
+    if path.is_dir():
+        storage = sorted(p for p in path.iterdir() if p.suffix in ROS2_STORAGE_SUFFIXES)
+        target = storage[0] if storage else path
+    if target.suffix == ".bag":
+        return f"if the recording was cut short, 'rosbag reindex {path}' may recover it"
+    if target.suffix == ".mcap":
+        return f"if the recording was cut short, 'mcap recover {target} -o recovered.mcap' may recover it"
+    return f"if the recording was cut short, 'ros2 bag reindex {path}' may recover it"
 
 
 # --- the frame source -----------------------------------------------------------
@@ -212,9 +263,11 @@ class BagSource(IndexedSource):
                 stamp = header_stamp_ns(raw, self._reader.is2)
                 stamps_ns.append(stamp if stamp else t)
         except (struct.error, IndexError):
-            raise InputError(f"{self.path}: a message on {self.topic} is truncated") from None
+            raise InputError(f"{self.path}: a message on {self.topic} is truncated; "
+                             f"{recovery_hint(self.path)}") from None
         except Exception as err:
-            raise InputError(f"{self.path}: cannot read {self.topic} ({_one_line(err)})") from None
+            raise InputError(f"{self.path}: cannot read {self.topic} ({_one_line(err)}); "
+                             f"{recovery_hint(self.path)}") from None
         if not log_ns:
             raise InputError(f"{self.path}: image topic {self.topic} has no messages")
         # Frames are ordered by stamp; the stable sort keeps bag order for equal stamps.
@@ -271,6 +324,9 @@ class BagSource(IndexedSource):
             msg = reader.deserialize(raw, conn.msgtype)
         except Exception as err:
             raise InputError(f"{where} cannot be deserialised ({_one_line(err)})") from None
+        size = message_size(msg, conn.msgtype)
+        if size is not None:  # before decoding: a huge frame is refused, not allocated
+            frame_size(*size, where)
         try:
             rgb = message_to_rgb(msg, conn.msgtype)
         except ValueError as err:

@@ -1,6 +1,15 @@
-"""Equirectangular video files read through OpenCV.
+"""Equirectangular video files: sampled through PyAV, random access and fallback through OpenCV.
 
-Stamps are the container's presentation times (``CAP_PROP_POS_MSEC`` read after
+Sampling (``frames(interval)``, ``stamps()``, ``expected_samples``) goes through
+``engine.sources.video_av.AvSampler`` when PyAV is installed and can demux the file:
+it decodes only the frames the samples need (key frames when every sample time has
+one nearby, else the exact frames; see that module), and its stamps are the frames'
+presentation times from one demux pass without decoding. ``frame_at`` (the GUI's
+random access) reads through OpenCV; a frame's index is the same in both (its
+position in presentation order, ``round(stamp * fps)`` at a constant frame rate).
+
+Without PyAV, or for a container PyAV cannot read, OpenCV does everything. Its
+stamps are the container's presentation times (``CAP_PROP_POS_MSEC`` read after
 each ``grab()``), shifted so that the first frame is at 0 s; when the container
 gives no usable times they are ``index / fps``. Knowing all stamps needs one
 pass over the video, done lazily once and cached. Skipped frames are only
@@ -21,6 +30,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..frames import Frame, FrameSource, check_equirectangular
+from ..validate import frame_size
+from .video_av import AvSampler, AvUnavailable
 
 # FFmpeg prints its own line for a broken file ("moov atom not found") before our one-line
 # error; keep it quiet (read when the first video is opened; set the variable to override).
@@ -47,11 +58,23 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
 class VideoSource(FrameSource):
     """A video file; random access for the GUI and a single pass for sampling."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, use_pyav: bool = True, keyframes: bool = True) -> None:
+        """``use_pyav=False`` forces the OpenCV reader; ``keyframes=False`` makes the
+        PyAV sampler deliver the exact frames (``engine.frames.sample_indices``)."""
         self.path = Path(path)
+        self._use_pyav = use_pyav
+        self._keyframes = keyframes
+        self._sampler: Optional[AvSampler] = None
         if not self.path.is_file():
             raise InputError(f"{self.path}: no such file")
         self._cap = _open_capture(self.path)
+        size = (int(self._cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self._cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        if size[0] > 0 and size[1] > 0:  # from the container's header: refuse before decoding
+            try:
+                frame_size(*size, str(self.path))
+            except InputError:
+                self._cap.release()
+                raise
         self._lock = threading.Lock()
         self.fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
         self._stamps: Optional[np.ndarray] = None
@@ -71,6 +94,30 @@ class VideoSource(FrameSource):
         self._resolution = (rgb.shape[1], rgb.shape[0])
         self._last = Frame(0, 0.0, rgb)
 
+    # --- PyAV sampler -----------------------------------------------------------
+
+    def _av(self) -> Optional[AvSampler]:
+        """The PyAV sampler, made on first use; None when PyAV cannot read this file."""
+        if self._use_pyav and self._sampler is None:
+            try:
+                self._sampler = AvSampler(self.path, use_keyframes=self._keyframes)
+            except AvUnavailable:
+                self._use_pyav = False
+        return self._sampler if self._use_pyav else None
+
+    @property
+    def sampler(self) -> Optional[AvSampler]:
+        """The PyAV sampler in use (None on the OpenCV path): its ``last_stats`` tell
+        what the last ``frames()`` decoded."""
+        return self._av()
+
+    def sample_indices(self, interval: float = 1.0) -> np.ndarray:
+        """The frames ``frames(interval)`` delivers (key frames where the sampler uses them)."""
+        sampler = self._av()
+        if sampler is not None:
+            return sampler.plan(interval).indices.copy()
+        return super().sample_indices(interval)
+
     # --- stamps -----------------------------------------------------------------
 
     def _stamp_from(self, cap: cv2.VideoCapture, index: int, prev: Optional[float]) -> float:
@@ -86,6 +133,8 @@ class VideoSource(FrameSource):
         raise InputError(f"{self.path}: video has neither frame times nor a frame rate")
 
     def stamps(self) -> np.ndarray:
+        if self._stamps is None and self._av() is not None:
+            self._stamps = self._av().index.stamps.copy()
         if self._stamps is None:
             cap = _open_capture(self.path)
             try:
@@ -108,6 +157,8 @@ class VideoSource(FrameSource):
     def expected_samples(self, interval: float = 1.0) -> int:
         """From the container's frame count and rate while the stamps are unknown,
         so that describing a video decodes it once, not twice."""
+        if self._av() is not None:
+            return int(self._av().plan(interval).indices.size)
         frames = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
         if self._stamps is not None or frames <= 0 or self.fps <= 0:
             return super().expected_samples(interval)
@@ -160,8 +211,13 @@ class VideoSource(FrameSource):
 
         Picks, for t_k = k * interval, the first frame with stamp >= t_k (each
         frame once), like ``sample_indices``; also fills the stamp cache when the
-        pass reaches the end.
+        pass reaches the end. With PyAV, the sampler's frames instead (module doc).
         """
+        sampler = self._av()
+        if sampler is not None:
+            self._stamps = sampler.index.stamps.copy()
+            yield from sampler.frames(interval)
+            return
         if self._stamps is not None:
             yield from self._frames_known(interval)
             return

@@ -1,0 +1,140 @@
+"""End-to-end `describe` speed on a GPU (or the CPU) and CPU/GPU agreement, as a markdown table.
+
+Self-contained: random weights in the official layouts (speed does not depend on the
+values), synthetic 2:1 panoramas, nothing downloaded. Timed: the whole `describe` (upload of
+the uint8 frames, resize + normalise on the device, the network, VLAD on the device, rows back
+to the host) after one warm-up call; the map vocabulary's k-means is included for the
+map-vocabulary rows (that is what a user runs).
+
+Agreement: the same frames described on the CPU in float32 and on the benchmark device at the
+row's precision; row cosine min / median, once with each side's own map vocabulary (what two
+users get) and once with the CPU's vocabulary on both sides (the network and VLAD alone). On a machine without a GPU the "device" is the
+CPU, so the float32 rows agree exactly and the bfloat16 rows measure autocast alone (the
+stand-in for a GPU's bfloat16). Agreement is computed on ``--agree-frames`` frames (the CPU
+side of ViT-G/14 is slow).
+
+    python benchmarks/bench_gpu.py                      # CUDA if present: 224 x 448, S/B/G
+    python benchmarks/bench_gpu.py --cpu-small          # no GPU: 112 x 224, S/B only, few frames
+    python benchmarks/bench_gpu.py --models effnet-vlad anyloc-vitg14 --frames 256 --batch 32
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from engine.descriptors import dinov2  # noqa: E402
+from engine.descriptors.anyloc import AnyLocVLAD, save_vocabulary  # noqa: E402
+from engine.descriptors.efficientnet import EfficientNetVLAD  # noqa: E402
+
+MODELS = ("effnet-vlad", "anyloc-vits14", "anyloc-vitb14", "anyloc-vitg14")
+
+
+def panoramas(n: int, height: int, seed: int = 0) -> list[np.ndarray]:
+    """Smooth random 2:1 panoramas at twice the input height (so the resize really runs)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(n):
+        small = rng.integers(0, 256, (height // 8, height // 4, 3)).astype(np.float32)
+        big = torch.nn.functional.interpolate(torch.from_numpy(small).permute(2, 0, 1)[None],
+                                              size=(2 * height, 4 * height), mode="bilinear")
+        out.append(big[0].permute(1, 2, 0).clamp(0, 255).byte().numpy())
+    return out
+
+
+def make(model: str, height: int, batch: int, device: str, precision: str, workdir: Path,
+         centres=None):
+    """A describer for ``model`` (effnet-vlad, or anyloc-<backbone>): map vocabulary, or ``centres``."""
+    if model == "effnet-vlad":
+        return EfficientNetVLAD(input_height=height // 16 * 16, batch_size=batch, device=device,
+                                precision=precision, vocabulary=centres)
+    backbone = model.split("-", 1)[1]
+    arch = dinov2.get_arch(backbone)
+    weights = workdir / arch.checkpoint_name
+    if not weights.exists():
+        torch.save(dinov2.random_dinov2(backbone).state_dict(), weights)
+    vocab = None
+    if centres is not None:
+        vocab = workdir / f"{backbone}_c_centers.pt"
+        save_vocabulary(vocab, centres)
+    return AnyLocVLAD(weights=str(weights), input_height=height, batch_size=batch, device=device,
+                      precision=precision, vocabulary=None if vocab is None else str(vocab))
+
+
+def centres_of(describer) -> np.ndarray:
+    return describer.vocabulary if isinstance(describer, EfficientNetVLAD) else describer.centers
+
+
+def timed(describer, frames: list[np.ndarray]) -> tuple[np.ndarray, float]:
+    describer.describe(iter(frames[: describer.batch_size]), describer.batch_size)   # warm-up
+    if describer.device.type == "cuda":
+        torch.cuda.synchronize()
+    t0 = time.perf_counter()
+    out = describer.describe(iter(frames), len(frames))
+    if describer.device.type == "cuda":
+        torch.cuda.synchronize()
+    return out, time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--models", nargs="+", default=None, choices=MODELS)
+    ap.add_argument("--height", type=int, default=None, help="input height (width = 2 x); default 224, 112 with --cpu-small")
+    ap.add_argument("--frames", type=int, default=None, help="frames timed (default 128, 8 with --cpu-small)")
+    ap.add_argument("--agree-frames", type=int, default=None, help="frames compared CPU vs device (default 8, 4 with --cpu-small)")
+    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--precisions", nargs="+", default=["float32", "bfloat16"])
+    ap.add_argument("--device", default="auto")
+    ap.add_argument("--cpu-small", action="store_true", help="CPU-sized run: 112 px, ViT-S/B only, few frames")
+    args = ap.parse_args()
+    small = args.cpu_small
+    models = args.models or (["effnet-vlad", "anyloc-vits14", "anyloc-vitb14"] if small else list(MODELS))
+    height = args.height or (112 if small else 224)
+    n_frames = args.frames or (8 if small else 128)
+    n_agree = args.agree_frames or (4 if small else 8)
+    batch = min(args.batch, 4) if small else args.batch
+    device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else
+                          ("cpu" if args.device == "auto" else args.device))
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else f"CPU ({torch.get_num_threads()} threads)"
+    frames = panoramas(max(n_frames, n_agree), height)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for model in models:
+            reference = None
+            for precision in args.precisions:
+                d = make(model, height, batch, str(device), precision, Path(tmp))
+                out, dt = timed(d, frames[:n_frames])
+                if reference is None:   # CPU float32 on the agreement frames, once per model
+                    ref = make(model, height, batch, "cpu", "float32", Path(tmp))
+                    reference = ref.describe(iter(frames[:n_agree]), n_agree)
+                    ref_centres = centres_of(ref)
+                    # The same vocabulary given as a file: features pooled in float32 as they come
+                    # (the map path pools float16-buffered ones), so compare like with like.
+                    ref_fixed = make(model, height, batch, "cpu", "float32", Path(tmp), centres=ref_centres)
+                    reference_fixed = ref_fixed.describe(iter(frames[:n_agree]), n_agree)
+                mine = make(model, height, batch, str(device), precision, Path(tmp))
+                cos = np.sum(reference * mine.describe(iter(frames[:n_agree]), n_agree), axis=1)
+                fixed = make(model, height, batch, str(device), precision, Path(tmp), centres=ref_centres)
+                cos_fixed = np.sum(reference_fixed * fixed.describe(iter(frames[:n_agree]), n_agree), axis=1)
+                rows.append((model, precision, d.settings().get("precision", precision), n_frames / dt,
+                             cos.min(), np.median(cos), cos_fixed.min(), np.median(cos_fixed), out.shape[1]))
+                print(f"  {model} {precision}: {n_frames / dt:.1f} frames/s", file=sys.stderr)
+    print(f"Device: {name}; torch {torch.__version__}; input {height} x {2 * height}; batch {batch}; "
+          f"{n_frames} frames timed, {n_agree} compared with CPU float32 (random weights, map vocabulary)\n")
+    print("| model | precision | ran as | frames/s | cos vs CPU fp32, own map vocabulary: min / median "
+          "| same vocabulary: min / median | dim |")
+    print("|---|---|---|---:|---:|---:|---:|")
+    for model, asked, ran, fps, cmin, cmed, fmin, fmed, dim in rows:
+        print(f"| {model} | {asked} | {ran} | {fps:.1f} | {cmin:.4f} / {cmed:.4f} | {fmin:.4f} / {fmed:.4f} | {dim} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,376 @@
+"""Loop closure by retrieval, evidence and consistency: the ``verified`` method.
+
+The stages read top to bottom (``detect_loops`` below calls them in this order); each is a
+plain function of plain arrays, and every number it uses is a ``MapParams`` entry declared
+once in ``engine.params.PARAMETERS`` (with where it came from):
+
+1. ``retrieve``     each node's best ``retrieval_k`` descriptor matches, temporal neighbours
+                    excluded, in blocks (``engine.retrieval``: never an n x n array).
+2. ``calibrate``    each match's cosine as standard deviations above the two nodes' own
+                    background (their similarities to unrelated nodes), so that one threshold
+                    means the same for any descriptor, scene and recording.
+3. ``support``      the mean calibrated score along the matched stretch, forwards (the same
+                    way again) and backwards (a reverse drive): the paper's window count,
+                    generalised to both directions.
+4. ``one_per_place`` a match must be the most confident (score + support) within
+                    ``place_radius`` nodes on both ends (non-maximum suppression in the
+                    (a, b) plane), so that geometry is checked once per place.
+5. ``geometry``     local features of the two frames matched and fitted with a two-view model
+                    on the sphere (essential matrix, or a pure rotation at the same spot):
+                    inliers are physical evidence of the same scene; the rotation gives the
+                    loop's ``yaw``. The same is measured between each end and its path
+                    neighbour just outside the temporal window (``path_inliers``): a place
+                    revisited within a metre shares more with the other visit than with a
+                    view a few metres along its own path. Cached per frame pair.
+6. ``confidence``   one ranking number from the three voices.
+7. ``tiers``        auto (strong evidence) or candidate (for a person), by the thresholds.
+8. ``consistency``  relative headings composed around a cycle of path and two loops must
+                    close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
+                    with the loops around it goes back to the candidate tier.
+
+Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
+so re-mapping after a threshold change costs only stages 5-8.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .loops import LoopCandidate
+from .params import MapParams
+
+
+# ----------------------------------------------------------------------------- plain data
+
+@dataclass
+class Matches:
+    """Candidate node pairs (a < b) with their evidence, one entry per pair."""
+
+    a: np.ndarray                 # int64 node index
+    b: np.ndarray                 # int64 node index, b - a > neighbour window
+    cosine: np.ndarray            # float32 descriptor cosine
+    score: np.ndarray             # float64 calibrated score (stage 2)
+    support: np.ndarray = None    # float64 best mean calibrated score along the stretch (stage 3)
+    direction: np.ndarray = None  # int64 +1 forward, -1 reverse (stage 3)
+    matches: np.ndarray = None    # int64 local feature matches (stage 4; -1 unknown)
+    inliers: np.ndarray = None    # int64 two-view inliers (stage 4; -1 unknown)
+    inlier_ratio: np.ndarray = None
+    yaw: np.ndarray = None        # float64 relative heading of b to a, degrees (NaN unknown)
+    path_inliers: np.ndarray = None  # int64 inliers of each end with its own path neighbour (-1 unknown)
+    confidence: np.ndarray = None
+
+    def __len__(self) -> int:
+        return int(self.a.size)
+
+    def take(self, keep: np.ndarray) -> "Matches":
+        out = {}
+        for k, v in self.__dict__.items():
+            out[k] = None if v is None else v[keep]
+        return Matches(**out)
+
+
+# ----------------------------------------------------------------------------- stages
+
+def retrieve(vectors: np.ndarray, params: MapParams, cache: dict) -> "tuple[np.ndarray, np.ndarray]":
+    """Stage 1: each node's best ``retrieval_k`` matches beyond the temporal neighbours, as
+    unique pairs (a < b) with their cosine. Cached per node set (``cache``)."""
+    from . import retrieval
+
+    key = ("nearest", vectors.shape, hash(vectors[:, :4].tobytes()), params.retrieval_k, params.neighbor_node_num)
+    if key not in cache:
+        neigh = retrieval.nearest(vectors, params.retrieval_k, params.neighbor_node_num)
+        cache[key] = neigh
+    neigh = cache[key]
+    m, k = neigh.index.shape
+    rows = np.repeat(np.arange(m, dtype=np.int64), k)
+    cols = neigh.index.reshape(-1).astype(np.int64)
+    ok = cols >= 0
+    a, b = np.minimum(rows[ok], cols[ok]), np.maximum(rows[ok], cols[ok])
+    pair = np.unique(a * m + b)
+    a, b = pair // m, pair % m
+    return a, b
+
+
+def background(vectors: np.ndarray, params: MapParams, cache: dict):
+    """Each node's background similarity statistics (for stage 2), cached per node set."""
+    from . import retrieval
+
+    key = ("background", vectors.shape, hash(vectors[:, :4].tobytes()), params.neighbor_node_num)
+    if key not in cache:
+        cache[key] = retrieval.background(vectors, params.neighbor_node_num)
+    return cache[key]
+
+
+def calibrate(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 2: (cosine, calibrated score) of pairs (a, b)."""
+    from . import retrieval
+
+    cos = retrieval.pair_similarities(vectors, a, b)
+    return cos, retrieval.pair_z(vectors, stats, a, b)
+
+
+def support(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray, params: MapParams
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 3: the better of the forward and the reverse mean calibrated score along the
+    stretch through (a, b), and which direction it was (+1 forward, -1 reverse).
+
+    A place passed once more along a path is a run of matches along a diagonal of the
+    similarity matrix; a crossing shares a single point and has no such run (stage 4 must
+    carry it)."""
+    from . import retrieval
+
+    fwd, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, +1)
+    rev, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, -1)
+    fwd = np.nan_to_num(fwd, nan=-np.inf)
+    rev = np.nan_to_num(rev, nan=-np.inf)
+    best = np.maximum(fwd, rev)
+    direction = np.where(rev > fwd, -1, 1).astype(np.int64)
+    return np.where(np.isfinite(best), best, np.nan), direction
+
+
+# Geometry is checked only on matches that could become a loop: this far below candidate_z
+# (a crossing's single pair can have a modest descriptor score and strong geometry).
+GEOMETRY_MARGIN_Z = 1.0
+# Inliers worth one standard deviation of calibrated score in the confidence ranking.
+INLIERS_PER_Z = 20.0
+
+
+def one_per_place(c: Matches, radius: int) -> np.ndarray:
+    """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
+    both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
+    ``radius`` nodes or so, not one per node pair."""
+    keep = np.ones(len(c), bool)
+    order = np.lexsort((c.b, c.a, -c.confidence))
+    taken_a: list[int] = []
+    taken_b: list[int] = []
+    for i in order:
+        if taken_a:
+            ta, tb = np.asarray(taken_a), np.asarray(taken_b)
+            if np.any((np.abs(ta - c.a[i]) <= radius) & (np.abs(tb - c.b[i]) <= radius)):
+                keep[i] = False
+                continue
+        taken_a.append(int(c.a[i]))
+        taken_b.append(int(c.b[i]))
+    return keep
+
+
+def _verified(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cache: dict):
+    """(matches, inliers, inlier_ratio, yaw of the shifted frames) of node pairs, from the
+    per-frame-pair cache, verifying only the pairs not seen before."""
+    from . import sphere
+
+    store = cache.setdefault("geometry", {})
+    ra, rb = node_rows[a], node_rows[b]
+    keys = list(zip(ra.tolist(), rb.tolist()))
+    todo = sorted({k for k in keys if k not in store})
+    if todo:
+        arr = np.asarray(todo, np.int64)
+        res = sphere.verify_pairs(features, arr[:, 0], arr[:, 1])
+        for j, k in enumerate(todo):
+            store[k] = (int(res["matches"][j]), int(res["inliers"][j]),
+                        float(res["inlier_ratio"][j]), float(res["yaw_deg"][j]))
+    if not keys:
+        return np.zeros((0, 4))
+    return np.asarray([store[k] for k in keys], np.float64)
+
+
+def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap: int, cache: dict) -> dict:
+    """Stage 5: two-view geometry on the sphere of node pairs (a, b), and of each end with its
+    path neighbour ``gap`` nodes away (the nearest node that could be a loop).
+
+    Returns arrays ``matches``, ``inliers`` (-1 where there are no features), ``inlier_ratio``,
+    ``yaw`` (degrees, shifted frames; NaN where no model) and ``path_inliers`` (the larger
+    count of the two ends with their path neighbours, before or after)."""
+    n = a.size
+    out = {"matches": np.full(n, -1, np.int64), "inliers": np.full(n, -1, np.int64),
+           "inlier_ratio": np.full(n, np.nan), "yaw": np.full(n, np.nan),
+           "path_inliers": np.full(n, -1, np.int64)}
+    if features is None or n == 0:
+        return out
+    pair = _verified(features, node_rows, a, b, cache)
+    out["matches"], out["inliers"] = pair[:, 0].astype(np.int64), pair[:, 1].astype(np.int64)
+    out["inlier_ratio"], out["yaw"] = pair[:, 2], pair[:, 3]
+    m = node_rows.size
+    best = np.zeros(n, np.int64)
+    for end in (a, b):
+        for step in (-gap, gap):
+            other = end + step
+            ok = (other >= 0) & (other < m)
+            if ok.any():
+                lo, hi = np.minimum(end[ok], other[ok]), np.maximum(end[ok], other[ok])
+                ref = _verified(features, node_rows, lo, hi, cache)[:, 1].astype(np.int64)
+                best[ok] = np.maximum(best[ok], ref)
+    out["path_inliers"] = best
+    return out
+
+
+def confidence(c: Matches) -> np.ndarray:
+    """Stage 6: calibrated score + positive support + inliers beyond the path's own /
+    ``INLIERS_PER_Z``.
+
+    Each voice is in (about) standard deviations of evidence: the score and the support are
+    calibrated z; ``INLIERS_PER_Z`` = 20 because unrelated views keep about 20 inliers at
+    most (99th percentile 22 in the probe of issue 13), so 20 more is one more spread."""
+    lift = np.where(c.inliers > 0, np.maximum(c.inliers - np.maximum(c.path_inliers, 0), 0), 0)
+    sup = np.where(np.isfinite(c.support), np.maximum(c.support, 0.0), 0.0)
+    return c.score + sup + lift / INLIERS_PER_Z
+
+
+def tiers(c: Matches, params: MapParams) -> np.ndarray:
+    """Stage 7: "auto", "candidate" or "" (dropped) for every match.
+
+    Automatic: strong geometry (``auto_inliers``, ``auto_inlier_ratio``, and ``auto_lift``
+    times the inliers each end shares with its own path neighbour) on a match at least at
+    ``candidate_z``; or, where geometry is not known (descriptors from another program), a
+    high score (``auto_z``) with strong support along the stretch (``auto_support``). A
+    candidate is any other match at ``candidate_z`` or with strong geometry alone."""
+    geo_strong = ((c.inliers >= params.auto_inliers)
+                  & (np.nan_to_num(c.inlier_ratio) >= params.auto_inlier_ratio)
+                  & (c.inliers >= params.auto_lift * np.maximum(c.path_inliers, 0)))
+    no_geo = c.inliers < 0
+    sup = np.nan_to_num(c.support, nan=-np.inf)
+    auto = ((geo_strong & (c.score >= params.candidate_z))
+            | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
+    cand = ~auto & ((c.score >= params.candidate_z) | geo_strong)
+    return np.where(auto, "auto", np.where(cand, "candidate", ""))
+
+
+# Heading drift per node step along the path, degrees (consecutive alignments err by a few
+# degrees; the tolerance of a cycle grows with the square root of the path it runs along).
+DRIFT_PER_STEP_DEG = 2.0
+
+
+def path_headings(features, columns, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
+                  cache: dict) -> Optional[np.ndarray]:
+    """Heading of every node relative to node 0, degrees, summed from consecutive relative
+    yaws: two-view geometry where features exist (a robot turning on the spot between two
+    nodes turns the view by 100 degrees or more, which column alignment of rotation-alike
+    corridors gets wrong: 122-degree turns read as 0-20 on the second family), column
+    alignment for steps without a model or without features; None without either."""
+    m = node_rows.size
+    if m < 2:
+        return np.zeros(m)
+    steps = np.arange(m - 1)
+    yaw = np.full(m - 1, np.nan)
+    if features is not None:
+        yaw = _verified(features, node_rows, steps, steps + 1, cache)[:, 3]
+        yaw = original_yaw(yaw, shifts[steps], shifts[steps + 1], frame_width)
+    if columns is not None and not np.isfinite(yaw).all():
+        from .verify import align_nodes, pair_yaw
+
+        _, sh = align_nodes(columns, steps, steps + 1)
+        yaw = np.where(np.isfinite(yaw), yaw,
+                       pair_yaw(sh, columns.shape[1], shifts[steps], shifts[steps + 1], frame_width))
+    if features is None and columns is None:
+        return None
+    return np.concatenate([[0.0], np.cumsum(np.nan_to_num(yaw))])
+
+
+def original_yaw(yaw_shifted: np.ndarray, shift_a: np.ndarray, shift_b: np.ndarray, frame_width: int) -> np.ndarray:
+    """Relative heading of the original frames from that of the panorama-shifted ones."""
+    if frame_width <= 0:
+        return np.asarray(yaw_shifted, np.float64)
+    deg = np.asarray(yaw_shifted, np.float64) + (np.asarray(shift_b) - np.asarray(shift_a)) * 360.0 / frame_width
+    return _wrap(deg)
+
+
+def _wrap(deg):
+    return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
+
+
+def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], params: MapParams) -> np.ndarray:
+    """Stage 8: demote automatic loops whose heading disagrees with the loops around them.
+
+    For loops (a1, b1) and (a2, b2) the cycle a1 -> a2 (path) -> b2 (loop) -> b1 (path) -> a1
+    (loop) must close: ``yaw1 - (H[b1] - H[a1])`` equals ``yaw2 - (H[b2] - H[a2])`` up to
+    ``heading_tol`` plus the drift along the path between them (``DRIFT_PER_STEP_DEG`` per
+    node, growing with the square root of the steps). Pairs too far apart for the test to mean
+    anything (tolerance over 90 degrees) are not compared. As in PCM, the largest mutually
+    consistent set wins, not the single most confident loop: loops are taken in order of the
+    confidence of all loops that agree with them, and one that disagrees with a loop already
+    taken and agrees with none goes back to "candidate" (a person decides)."""
+    out = status.copy()
+    if headings is None:
+        return out
+    auto = np.flatnonzero((status == "auto") & np.isfinite(c.yaw))
+    if auto.size < 2:
+        return out
+    a, b = c.a[auto], c.b[auto]
+    offset = _wrap(c.yaw[auto] - (headings[b] - headings[a]))
+    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
+    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
+    err = np.abs(_wrap(offset[:, None] - offset[None, :]))
+    comparable = tol <= 90.0
+    agree = comparable & (err <= tol)
+    disagree = comparable & ~agree
+    weight = np.where(agree, c.confidence[auto][None, :], 0.0).sum(axis=1)
+    taken = np.zeros(auto.size, bool)
+    for k in np.argsort(-weight, kind="stable"):
+        if disagree[k, taken].any() and not agree[k, taken].any():
+            out[auto[k]] = "candidate"
+        else:
+            taken[k] = True
+    return out
+
+
+# ----------------------------------------------------------------------------- the method
+
+def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarray,
+                 features=None, columns=None, shifts=None, frame_width: int = 0,
+                 cache: Optional[dict] = None) -> list[LoopCandidate]:
+    """The ``verified`` method on node descriptors ``vectors`` (m, d): stages 1-8.
+
+    ``node_rows`` are the descriptor rows of the nodes (features are per row); ``features``
+    (``engine.features.FeatureTable``), ``columns`` and ``shifts`` are optional: without
+    features there is no geometry stage and automatic loops need score and support."""
+    cache = {} if cache is None else cache
+    v = np.asarray(vectors, np.float32)
+    m = v.shape[0]
+    node_rows = np.asarray(node_rows, np.int64)
+    shifts = np.zeros(m, np.int64) if shifts is None else np.asarray(shifts, np.int64)
+    if m <= params.neighbor_node_num + 1:
+        return []
+    a, b = retrieve(v, params, cache)                                  # 1
+    stats = background(v, params, cache)
+    cos, score = calibrate(v, stats, a, b)                             # 2
+    c = Matches(a=a, b=b, cosine=cos, score=score)
+    c.support, c.direction = support(v, stats, a, b, params)          # 3
+    sup = np.nan_to_num(c.support, nan=-np.inf)
+    c = c.take((c.score >= params.candidate_z - GEOMETRY_MARGIN_Z)
+               | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
+    c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
+    c = c.take(one_per_place(c, params.place_radius))                  # 4
+    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache)   # 5
+    c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
+    c.path_inliers = geo["path_inliers"]
+    c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
+    if columns is not None and len(c):
+        from .verify import align_nodes, pair_yaw
+
+        _, sh = align_nodes(columns, c.a, c.b)
+        column_yaw = pair_yaw(sh, columns.shape[1], shifts[c.a], shifts[c.b], frame_width)
+        c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw)
+    c.confidence = confidence(c)                                       # 6
+    status = tiers(c, params)                                          # 7
+    headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
+    status = consistency(c, status, headings, params)                  # 8
+    out = []
+    for i in np.flatnonzero(status != ""):
+        out.append(LoopCandidate(
+            a=int(c.a[i]), b=int(c.b[i]), similarity=float(c.cosine[i]), window_count=0,
+            yaw=None if not np.isfinite(c.yaw[i]) else float(c.yaw[i]), score=float(c.score[i]),
+            status=str(status[i]), evidence=_evidence(c, i)))
+    out.sort(key=lambda lc: (lc.a, lc.b))
+    return out
+
+
+def _evidence(c: Matches, i: int) -> dict:
+    known = c.inliers[i] >= 0
+    return {"score": float(c.score[i]), "support": float(c.support[i]), "direction": int(c.direction[i]),
+            "matches": int(c.matches[i]) if known else None, "inliers": int(c.inliers[i]) if known else None,
+            "inlier_ratio": float(c.inlier_ratio[i]) if known else None,
+            "path_inliers": int(c.path_inliers[i]) if known else None,
+            "confidence": float(c.confidence[i])}

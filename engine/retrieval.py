@@ -1,0 +1,363 @@
+"""Loop candidates by retrieval: each node's k most similar distant nodes, never an n x n array.
+
+The paper's methods and the first "verified" stage look at every pair of nodes, which
+needs an (n, n) similarity matrix: 20k nodes are 1.6 GB per float32 copy, 100k are 40 GB.
+Here every question is answered with memory bounded whatever n:
+
+* ``nearest``: for every row its k best rows more than ``exclude`` apart in time.
+  Exact search multiplies one block of rows by all rows at a time (``block_rows_for``
+  keeps rows * n under ``BLOCK_ELEMENTS``); beyond ``EXACT_MAX_COST`` (n * n * d) the
+  approximate path (an inverted file searched with matrix products, numpy only) takes over.
+* ``background``: each row's robust similarity to "a different place" (median and MAD
+  of its similarities to a fixed random sample of columns outside its temporal window).
+* ``calibrated`` / ``pair_z``: symmetric z-scores of candidate pairs against both rows'
+  backgrounds (the same formula as ``engine.calibrate.zscores``, without the matrix).
+* ``diagonal_support``: the mean z-score along a matched stretch, forward or reverse.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .calibrate import robust_stats
+
+# Elements of one similarity block (rows x n). A block costs 4 bytes (float32 sims) plus
+# 8 bytes (the int64 index array of np.argpartition) per element: 16M elements is about
+# 200 MB, a few hundred MB at most whatever n.
+BLOCK_ELEMENTS = 16_000_000
+
+# Exact search costs n * n * d multiply-adds plus an n * n selection; the approximate
+# path grows about linearly with n. Measured with benchmarks/bench_retrieval.py
+# (random-walk 1024-D descriptors, k 10, OMP_NUM_THREADS=2, CPU seconds on the shared
+# 2-core development machine): exact 1.1 s at 5k (n*n*d 2.6e10) and 14.9 s at 20k
+# (4.1e11); approximate 3.9 s at 5k and 8.7 s at 20k. The two cross near 12k-15k rows
+# at 1024-D (n*n*d about 2e11), where exact costs about 7 s: "auto" stays exact (no
+# recall loss) up to there. 100k x 1024-D (1e13) would cost exact about 6 minutes.
+EXACT_MAX_COST = 2e11
+
+# Columns sampled per row for the background: the median of 1024 values has a standard
+# error of 1.25 / sqrt(1024), about 4% of the spread (the brief asked for >= 1024).
+BACKGROUND_SAMPLE = 1024
+# MAD -> standard deviation for a normal distribution; spread floor against division by 0.
+_SD_FLOOR = 1e-3
+
+METHODS = ("auto", "exact", "approximate")
+
+
+@dataclass(frozen=True)
+class Neighbours:
+    """index[i]: rows j with |i - j| > exclude, most similar first; sim[i] their cosines.
+    Missing entries (fewer than k distant rows) are index -1, sim NaN."""
+    index: np.ndarray   # (n, k) int64
+    sim: np.ndarray     # (n, k) float32
+
+
+@dataclass(frozen=True)
+class Background:
+    """Per-row background of similarities to rows outside the temporal window."""
+    mean: np.ndarray    # (n,) float32, robust centre (median)
+    std: np.ndarray     # (n,) float32, robust spread (1.4826 * MAD, floored at 1e-3)
+    exclude: int        # the temporal window the statistics left out
+
+
+def block_rows_for(n: int, budget: int = BLOCK_ELEMENTS) -> int:
+    """Rows per similarity block so that rows * n <= budget (at least one row)."""
+    return int(max(1, min(max(n, 1), budget // max(n, 1))))
+
+
+def pair_similarities(vectors: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """cos(v[a_k], v[b_k]) for every pair, a chunk at a time: gathering all pairs of
+    long descriptors at once would need (pairs x d) floats twice."""
+    a = np.asarray(a, np.int64)
+    b = np.asarray(b, np.int64)
+    out = np.empty(a.size, dtype=np.float32)
+    for k in range(0, a.size, chunk):
+        out[k:k + chunk] = np.einsum("ij,ij->i", vectors[a[k:k + chunk]], vectors[b[k:k + chunk]])
+    return out
+
+
+def _mask_window(sims: np.ndarray, r0: int, exclude: int, value: float) -> None:
+    """Set sims[i - r0, j] = value for |i - j| <= exclude (in place; rows r0..r0+len)."""
+    rows = np.arange(sims.shape[0])
+    n = sims.shape[1]
+    for off in range(-exclude, exclude + 1):
+        cols = rows + r0 + off
+        ok = (cols >= 0) & (cols < n)
+        sims[rows[ok], cols[ok]] = value
+
+
+def _empty(n: int, k: int) -> Neighbours:
+    return Neighbours(np.full((n, k), -1, np.int64), np.full((n, k), np.nan, np.float32))
+
+
+def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int]) -> Neighbours:
+    n = v.shape[0]
+    out = _empty(n, k)
+    kk = min(k, n)
+    if kk == 0:
+        return out
+    rows = block_rows_for(n) if block_rows is None else max(1, int(block_rows))
+    for r0 in range(0, n, rows):
+        r1 = min(n, r0 + rows)
+        sims = v[r0:r1] @ v.T
+        _mask_window(sims, r0, exclude, -np.inf)
+        top = np.argpartition(sims, n - kk, axis=1)[:, n - kk:] if kk < n else np.tile(np.arange(n), (r1 - r0, 1))
+        s = np.take_along_axis(sims, top, axis=1)
+        order = np.argsort(-s, axis=1, kind="stable")
+        top = np.take_along_axis(top, order, axis=1)
+        s = np.take_along_axis(s, order, axis=1)
+        bad = ~np.isfinite(s)
+        top[bad] = -1
+        s[bad] = np.nan
+        out.index[r0:r1, :kk] = top
+        out.sim[r0:r1, :kk] = s
+    return out
+
+
+# Approximate path: an inverted file searched with matrix products. Rows are grouped
+# into cells by spherical k-means (CELL_ROWS rows per cell on average, centres trained
+# on a sample of SAMPLE_PER_CELL rows per cell); each query scans the NPROBE cells
+# whose centres are most similar to it, as one (queries of the cell) x (rows of the
+# cell) product per cell, and keeps exact full-vector similarities. Cost about
+# n * NPROBE * CELL_ROWS * d instead of n * n * d. Measured on 100k x 1024-D random-walk
+# descriptors (benchmarks/bench_retrieval.py, one thread, CPU seconds): NPROBE 8 takes
+# 10.9 s, recall@10 0.894 against exact, and finds 99.96% of the revisits; NPROBE 16
+# takes 20.2 s for recall@10 0.922 and 99.99%: the revisits (what loop closure needs)
+# are already found at 8, so 8 it is. faiss-cpu (IVF-flat, HNSW) was measured slower
+# (see that benchmark's docstring), so no dependency is added.
+CELL_ROWS = 256
+SAMPLE_PER_CELL = 32
+KMEANS_ITERATIONS = 8
+NPROBE = 8
+
+
+def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndarray:
+    """(cells, d) unit centres of spherical k-means on a random sample of rows, centred.
+
+    Centring matters: descriptors share a common direction (unrelated places have cosine
+    0.3 or more), and without it one "hub" cell near that direction holds many rows and
+    is probed by almost every query (measured: 3.7x the balanced cost at 20k rows)."""
+    rng = np.random.default_rng(seed)
+    n = v.shape[0]
+    sample = v[np.sort(rng.choice(n, min(n, cells * SAMPLE_PER_CELL), replace=False))] - centre
+    sample /= np.maximum(np.linalg.norm(sample, axis=1, keepdims=True), 1e-12)
+    centres = sample[rng.choice(sample.shape[0], cells, replace=False)].copy()
+    for _ in range(KMEANS_ITERATIONS):
+        label = np.argmax(sample @ centres.T, axis=1)
+        onehot = np.zeros((cells, sample.shape[0]), np.float32)
+        onehot[label, np.arange(sample.shape[0])] = 1.0
+        sums = onehot @ sample          # per-cell sums as one product (np.add.at is slow)
+        norm = np.linalg.norm(sums, axis=1)
+        empty = norm == 0   # an empty cell restarts on a random sample row
+        sums[empty] = sample[rng.choice(sample.shape[0], int(empty.sum()))]
+        centres = sums / np.linalg.norm(sums, axis=1, keepdims=True)
+    return centres.astype(np.float32)
+
+
+def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: Optional[int] = None, seed: int = 0) -> Neighbours:
+    n = v.shape[0]
+    nprobe = NPROBE if nprobe is None else nprobe
+    cells = int(max(1, min(n // 4, round(n / CELL_ROWS))))
+    nprobe = int(min(nprobe, cells))
+    centre = v.mean(axis=0)
+    centres = _kmeans(v, centre, cells, seed)
+    offset = centres @ centre
+    # Each row's cell (its best centre) and the nprobe cells it scans, a block at a time.
+    # The centred row (v - centre) / |v - centre| scores (v @ c - centre @ c) / |v - centre|
+    # against centre c; the row's norm does not change its ranking of centres.
+    cell = np.empty(n, np.int64)
+    probes = np.empty((n, nprobe), np.int64)
+    rows = block_rows_for(cells * 16)
+    for r0 in range(0, n, rows):
+        sc = v[r0:r0 + rows] @ centres.T - offset
+        top = np.argpartition(sc, cells - nprobe, axis=1)[:, cells - nprobe:] if nprobe < cells else \
+            np.tile(np.arange(cells), (sc.shape[0], 1))
+        probes[r0:r0 + rows] = top
+        cell[r0:r0 + rows] = np.argmax(sc, axis=1)
+    members_order = np.argsort(cell, kind="stable")
+    member_start = np.searchsorted(cell[members_order], np.arange(cells + 1))
+    flat = probes.ravel()
+    probe_order = np.argsort(flat, kind="stable")
+    probe_start = np.searchsorted(flat[probe_order], np.arange(cells + 1))
+    # Candidates: k per (query, probed cell), in the query's slot for that probe.
+    cand_i = np.full((n, nprobe * k), -1, np.int64)
+    cand_s = np.full((n, nprobe * k), -np.inf, np.float32)
+    for c in range(cells):
+        mem = members_order[member_start[c]:member_start[c + 1]]
+        hits = probe_order[probe_start[c]:probe_start[c + 1]]
+        if mem.size == 0 or hits.size == 0:
+            continue
+        q_all, slot_all = hits // nprobe, hits % nprobe
+        vm = v[mem]
+        step = block_rows_for(mem.size)
+        for h0 in range(0, q_all.size, step):
+            q, slot = q_all[h0:h0 + step], slot_all[h0:h0 + step]
+            sims = v[q] @ vm.T
+            sims[np.abs(q[:, None] - mem[None, :]) <= exclude] = -np.inf
+            kk = min(k, mem.size)
+            top = np.argpartition(sims, mem.size - kk, axis=1)[:, mem.size - kk:]
+            cols = slot[:, None] * k + np.arange(kk)[None, :]
+            cand_i[q[:, None], cols] = mem[top]
+            cand_s[q[:, None], cols] = np.take_along_axis(sims, top, axis=1)
+    out = _empty(n, k)
+    kk = min(k, cand_s.shape[1])
+    top = np.argpartition(cand_s, cand_s.shape[1] - kk, axis=1)[:, cand_s.shape[1] - kk:]
+    s = np.take_along_axis(cand_s, top, axis=1)
+    order = np.argsort(-s, axis=1, kind="stable")
+    top = np.take_along_axis(top, order, axis=1)
+    s = np.take_along_axis(s, order, axis=1)
+    idx = np.take_along_axis(cand_i, top, axis=1)
+    miss = ~np.isfinite(s)
+    idx[miss] = -1
+    s[miss] = np.nan
+    out.index[:, :kk] = idx
+    out.sim[:, :kk] = s
+    return out
+
+
+def choose_method(n: int, d: int) -> str:
+    """"exact" while n * n * d <= EXACT_MAX_COST, else "approximate"."""
+    if float(n) * n * d <= EXACT_MAX_COST:
+        return "exact"
+    return "approximate"
+
+
+def nearest(vectors: np.ndarray, k: int, exclude: int, *, block_rows: Optional[int] = None,
+            method: str = "auto") -> Neighbours:
+    """For every row i its k most similar rows j with |i - j| > exclude, best first.
+
+    ``vectors`` (n, d) are L2-normalised rows (cosine = dot product). ``method``:
+    "exact" (blocked matrix products, memory rows * n <= BLOCK_ELEMENTS), "approximate"
+    (an inverted file searched with matrix products, exact similarities of what it
+    finds; exact for fewer than 4 * CELL_ROWS rows) or "auto" (``choose_method``). ``block_rows`` overrides the exact block size.
+    """
+    if method not in METHODS:
+        raise ValueError(f"unknown retrieval method {method!r}; choose one of {', '.join(METHODS)}")
+    v = np.ascontiguousarray(vectors, dtype=np.float32)
+    if v.ndim != 2:
+        raise ValueError(f"vectors must be a 2-D array, got shape {v.shape}")
+    n, d = v.shape
+    k = int(k)
+    exclude = max(0, int(exclude))
+    if method == "auto":
+        method = choose_method(n, d)
+    if method == "approximate" and n > 4 * CELL_ROWS:
+        return _approximate(v, k, exclude)
+    return _exact(v, k, exclude, block_rows)
+
+
+def sample_columns(n: int, size: int = BACKGROUND_SAMPLE, seed: int = 0) -> np.ndarray:
+    """A fixed random sample of ``size`` column indices (all of them when n <= size), sorted."""
+    if n <= size:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, size, replace=False))
+
+
+def sampled_similarities(vectors: np.ndarray, cols: np.ndarray, exclude: int):
+    """Yield (r0, r1, block) with block = v[r0:r1] @ v[cols].T as float32, NaN where
+    |row - col| <= exclude: the (n, len(cols)) matrix one row block at a time."""
+    v = np.asarray(vectors, dtype=np.float32)
+    n = v.shape[0]
+    vc = v[cols]
+    rows = block_rows_for(max(len(cols), 1) * 16)   # blocks of at most BLOCK_ELEMENTS / 16
+    for r0 in range(0, n, rows):
+        r1 = min(n, r0 + rows)
+        block = v[r0:r1] @ vc.T
+        near = np.abs(np.arange(r0, r1)[:, None] - cols[None, :]) <= exclude
+        block[near] = np.nan
+        yield r0, r1, block
+
+
+def background(vectors: np.ndarray, exclude: int, sample: int = BACKGROUND_SAMPLE, seed: int = 0) -> Background:
+    """Each row's median and MAD spread of its similarities to a random column sample.
+
+    The columns are one fixed random sample of ``sample`` rows (seeded, the same for
+    every row) rather than the exact search blocks: it costs n * sample * d, is the same
+    for the exact and approximate paths, and a robust statistic of 1024 values is as
+    good as of all n. Columns within ``exclude`` of the row are left out; revisits are a
+    few per row at most, so median and MAD ignore them. Rows with no distant column get
+    the statistics of all sampled values.
+    """
+    import warnings
+
+    v = np.asarray(vectors, dtype=np.float32)
+    n = v.shape[0]
+    mean = np.zeros(n, np.float32)
+    std = np.ones(n, np.float32)
+    cols = sample_columns(n, sample, seed)
+    pooled = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for r0, r1, block in sampled_similarities(v, cols, exclude):
+            mu, sd = robust_stats(block, axis=1)
+            mean[r0:r1], std[r0:r1] = mu, sd
+            pooled.append(block[::max(1, (r1 - r0) // 64)].ravel())
+    allv = np.concatenate(pooled) if pooled else np.zeros(0, np.float32)
+    allv = allv[~np.isnan(allv)]
+    if allv.size:
+        g_mu, g_sd = robust_stats(allv.astype(np.float64))
+        miss = np.isnan(mean)
+        mean[miss], std[miss] = g_mu, g_sd
+    else:
+        mean[:], std[:] = 0.0, 1.0
+    return Background(mean.astype(np.float32), np.maximum(std, _SD_FLOOR).astype(np.float32), int(exclude))
+
+
+def _z(sims: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Symmetric z of pair (a, b): sim against the mean of both backgrounds,
+    z = (s - (mu_a + mu_b) / 2) / sqrt((sd_a^2 + sd_b^2) / 2). A pair is one place
+    seen twice, so both rows' ideas of "different place" count equally, and z(a, b) ==
+    z(b, a). Same formula as engine.calibrate.zscores."""
+    mu = 0.5 * (stats.mean[a] + stats.mean[b])
+    sd = np.sqrt(0.5 * (stats.std[a] ** 2 + stats.std[b] ** 2))
+    return ((sims - mu) / sd).astype(np.float32)
+
+
+def pair_z(vectors: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Calibrated z-score of arbitrary pairs (a_k, b_k)."""
+    a = np.asarray(a, np.int64)
+    b = np.asarray(b, np.int64)
+    return _z(pair_similarities(np.asarray(vectors, np.float32), a, b), stats, a, b)
+
+
+def calibrated(neigh: Neighbours, stats: Background) -> np.ndarray:
+    """(n, k) z-scores of the neighbour pairs (NaN where the neighbour is missing)."""
+    n, k = neigh.index.shape
+    a = np.repeat(np.arange(n), k)
+    b = neigh.index.ravel()
+    ok = b >= 0
+    z = np.full(n * k, np.nan, np.float32)
+    z[ok] = _z(neigh.sim.ravel()[ok], stats, a[ok], b[ok])
+    return z.reshape(n, k)
+
+
+def diagonal_support(vectors: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray,
+                     half: int, direction: int) -> tuple[np.ndarray, np.ndarray]:
+    """Mean z of the pairs (a + t, b + direction * t), 0 < |t| <= half, and how many were used.
+
+    ``direction`` +1: the stretch around a is driven again the same way around b; -1: in
+    reverse. Pairs outside [0, n) or within ``stats.exclude`` of each other in time are
+    skipped; a pair with none left gets NaN and count 0. Row dot products only.
+    """
+    if direction not in (1, -1):
+        raise ValueError("direction must be +1 (same way) or -1 (reverse)")
+    v = np.asarray(vectors, np.float32)
+    n = v.shape[0]
+    a = np.asarray(a, np.int64)
+    b = np.asarray(b, np.int64)
+    t = np.concatenate([np.arange(-half, 0), np.arange(1, half + 1)])
+    ii = (a[:, None] + t[None, :]).ravel()
+    jj = (b[:, None] + direction * t[None, :]).ravel()
+    ok = (ii >= 0) & (ii < n) & (jj >= 0) & (jj < n) & (np.abs(ii - jj) > stats.exclude)
+    z = np.zeros(ii.size, np.float32)
+    z[ok] = pair_z(v, stats, ii[ok], jj[ok])
+    ok = ok.reshape(a.size, t.size)
+    count = ok.sum(axis=1)
+    total = np.where(ok, z.reshape(a.size, t.size), 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
+    return mean.astype(np.float32), count.astype(np.int64)

@@ -1,0 +1,309 @@
+"""Sample a video by decoding only the frames the samples need (PyAV, FFmpeg).
+
+Decoding is what a long 4K recording costs (a 2-minute 3840x1920 H.264 clip takes
+about a minute to decode fully on 2 cores); sampling at 1 Hz keeps 1 frame in 30.
+A compressed video can only be decoded from a key frame onwards, so:
+
+1. **Index** (``read_index``): one demux pass reads every packet's presentation time
+   and key flag, without decoding (I/O only). Stamps are presentation times in
+   seconds from the first frame; a frame's index is its position in presentation
+   order, which equals ``round(stamp * fps)`` for constant-frame-rate video.
+2. **Plan** (``plan_samples``): for t_k = k * interval, either
+   - *key frames*: the key frame nearest to each t_k, when EVERY t_k has a key frame
+     of its own within ``keyframe_tolerance(interval)`` = max(0.25 s, interval / 4),
+     plus half a frame (one decode per sample); or
+   - *exact*: the first frame with stamp >= t_k (``engine.frames.sample_indices``,
+     the same frames as the OpenCV reader).
+3. **Decode** (``AvSampler.frames``): picks are grouped by the key frame their
+   decoding starts from; for each group the reader seeks to that key frame and
+   decodes forward to the group's last pick, then drains the decoder. GOPs without
+   a pick are never decoded. This decodes the fewest frames either way: seeking per
+   sample when the GOP is short, one forward run when several samples share a GOP.
+
+Delivered frames carry the exact stamp of the decoded frame (its pts), never the
+requested time. ``SampleStats`` tells how many packets went to the decoder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Iterator, Optional
+
+import numpy as np
+
+from ..errors import InputError
+from ..frames import Frame, check_equirectangular, sample_indices
+
+try:  # PyAV is optional at run time: VideoSource falls back to OpenCV without it
+    import av
+    import av.error
+except ImportError:  # pragma: no cover - exercised only where PyAV is not installed
+    av = None
+
+# A key frame may stand in for the sample time t_k when it is this close to it.
+KEYFRAME_MIN_TOLERANCE_S = 0.25
+KEYFRAME_INTERVAL_FRACTION = 0.25
+
+
+def keyframe_tolerance(interval: float) -> float:
+    """How far (seconds) a key frame may lie from its sample time: max(0.25 s, interval / 4).
+
+    interval / 4 keeps consecutive samples between 0.5 and 1.5 intervals apart, so the
+    sampling stays regular; the 0.25 s floor is a quarter metre of travel at 1 m/s
+    (a walking robot or person), far below the place scale of a topological map (nodes
+    are metres apart), so a map built from key frames sees the same places. With a
+    camera's usual 0.5-1 s GOP every sample at 1 Hz then finds its key frame.
+    """
+    return max(KEYFRAME_MIN_TOLERANCE_S, KEYFRAME_INTERVAL_FRACTION * interval)
+
+
+class AvUnavailable(Exception):
+    """PyAV is missing or cannot read this file the way the sampler needs (caller falls back)."""
+
+
+@dataclass(frozen=True)
+class StreamIndex:
+    """What one demux pass learns about the video stream (no decoding)."""
+
+    stamps: np.ndarray      # float64 seconds from the first frame, presentation order
+    pts: np.ndarray         # int64 pts (stream time base), presentation order
+    key: np.ndarray         # bool, presentation order: the frame is a key frame
+    decode_pos: np.ndarray  # int64, presentation order: the packet's position in decode order
+    fps: float
+
+    def __len__(self) -> int:
+        return int(self.stamps.size)
+
+
+@dataclass(frozen=True)
+class SamplePlan:
+    indices: np.ndarray  # int64 frames to deliver, increasing
+    mode: str            # "keyframes" or "exact"
+
+
+@dataclass
+class SampleStats:
+    """What the last ``frames()`` call did: for tests and benchmarks."""
+
+    mode: str = ""
+    decoded: int = 0       # packets sent to the decoder (decoded frames)
+    delivered: int = 0
+    seeks: int = 0
+    runs: list = field(default_factory=list)  # (first, last) decode positions per run
+
+
+def plan_samples(index: StreamIndex, interval: float, use_keyframes: bool = True) -> SamplePlan:
+    """Which frames sampling every ``interval`` seconds delivers (see module doc).
+
+    Key frames are used only when every sample time t_k has its own key frame within
+    ``keyframe_tolerance(interval)`` plus half a frame; otherwise every sample is the exact
+    frame, so a recording is sampled one way throughout (no mixture of early and late
+    samples). Known limit: a GOP slightly longer than the interval (30 frames at 29.97 fps
+    sampled at 1 Hz) drifts 1 ms per sample off the sample times, so on recordings longer
+    than about 4 minutes it fails the rule and is sampled exactly (correct, but slower).
+    """
+    exact = sample_indices(index.stamps, interval)
+    if not use_keyframes or interval <= 0 or exact.size == 0:
+        return SamplePlan(exact, "exact")
+    key_idx = np.flatnonzero(index.key)
+    if key_idx.size == 0:
+        return SamplePlan(exact, "exact")
+    key_t = index.stamps[key_idx]
+    targets = index.stamps[0] + np.arange(exact.size) * interval
+    right = np.clip(np.searchsorted(key_t, targets), 0, key_t.size - 1)
+    left = np.clip(right - 1, 0, key_t.size - 1)
+    nearest = np.where(np.abs(key_t[left] - targets) <= np.abs(key_t[right] - targets), left, right)
+    # + half a frame: frames are discrete, so a key frame can only be "on" a sample time to
+    # within half a frame (a 0.5005 s GOP at 29.97 fps is at most 0.25025 s from 1 Hz times)
+    half_frame = 0.5 / index.fps if index.fps > 0 else 0.0
+    ok = np.abs(key_t[nearest] - targets) <= keyframe_tolerance(interval) + half_frame + 1e-9
+    if not np.all(ok) or np.unique(nearest).size != nearest.size:
+        return SamplePlan(exact, "exact")
+    return SamplePlan(key_idx[nearest].astype(np.int64), "keyframes")
+
+
+def _one_line(err: BaseException) -> str:
+    """FFmpeg's reason without the errno and the C function name."""
+    text = getattr(err, "strerror", None) or str(err)
+    return " ".join(str(text).split()) or type(err).__name__
+
+
+def read_index(path: Path) -> StreamIndex:
+    """Demux ``path`` once (no decoding): pts, key flags and decode order of every frame.
+
+    Raises AvUnavailable when PyAV is missing, cannot open the container, or the
+    stream has no usable presentation times (the OpenCV reader handles those), and
+    InputError when the file is broken part way.
+    """
+    if av is None:
+        raise AvUnavailable("PyAV is not installed")
+    try:
+        container = av.open(str(path))
+    except (av.error.FFmpegError, OSError) as err:
+        raise AvUnavailable(_one_line(err)) from None
+    try:
+        if not container.streams.video:
+            raise AvUnavailable("no video stream")
+        stream = container.streams.video[0]
+        pts: list[int] = []
+        key: list[bool] = []
+        try:
+            for packet in container.demux(stream):
+                if packet.size == 0:  # the demuxer's end-of-stream marker
+                    continue
+                if packet.pts is None:
+                    raise AvUnavailable("packets without presentation times")
+                pts.append(int(packet.pts))
+                key.append(bool(packet.is_keyframe))
+        except av.error.FFmpegError as err:
+            raise InputError(f"{path}: video is damaged ({_one_line(err)})") from None
+        declared = int(stream.frames or 0)  # the container's own count (mp4: its index); 0 unknown
+        fps = float(stream.average_rate or stream.guessed_rate or 0.0)
+        time_base = Fraction(stream.time_base) if stream.time_base else None
+    finally:
+        container.close()
+    if not pts:
+        raise InputError(f"{path}: video has no frames")
+    if declared > len(pts):  # the demuxer stops quietly at the end of a cut-off file
+        raise InputError(f"{path}: video is truncated or damaged: {len(pts)} of the "
+                         f"{declared} frames it declares can be read")
+    if time_base is None:
+        raise AvUnavailable("no time base")
+    dec_pts = np.asarray(pts, dtype=np.int64)
+    order = np.argsort(dec_pts, kind="stable")  # decode order -> presentation order
+    pres_pts = dec_pts[order]
+    if np.any(np.diff(pres_pts) <= 0):
+        raise AvUnavailable("repeated presentation times")
+    stamps = (pres_pts - pres_pts[0]).astype(np.float64) * float(time_base)
+    return StreamIndex(stamps=stamps, pts=pres_pts, key=np.asarray(key, bool)[order],
+                       decode_pos=order.astype(np.int64), fps=fps)
+
+
+class AvSampler:
+    """Sampled frames of one video, decoding only what the samples need."""
+
+    def __init__(self, path: str | Path, use_keyframes: bool = True) -> None:
+        self.path = Path(path)
+        self.use_keyframes = use_keyframes
+        self.index = read_index(self.path)
+        self.last_stats = SampleStats()
+
+    def plan(self, interval: float) -> SamplePlan:
+        return plan_samples(self.index, interval, self.use_keyframes)
+
+    def _runs(self, picks: np.ndarray) -> list[tuple[int, int, list[int]]]:
+        """Decode runs (first, last decode position, picks) covering ``picks``.
+
+        A pick is decoded from the last key frame before it in decode order that is
+        also presented no later than it (so open-GOP leading frames start one GOP
+        earlier); picks that share a start key share one run.
+        """
+        idx = self.index
+        key_dec = np.sort(idx.decode_pos[idx.key])  # decode positions of key frames
+        pres_of = np.empty(len(idx), dtype=np.int64)  # decode position -> presentation position
+        pres_of[idx.decode_pos] = np.arange(len(idx))
+        runs: dict[int, list] = {}
+        for i in picks:
+            d = int(idx.decode_pos[i])
+            j = int(np.searchsorted(key_dec, d, side="right")) - 1
+            while j > 0 and idx.pts[pres_of[key_dec[j]]] > idx.pts[i]:
+                j -= 1
+            start = int(key_dec[j]) if j >= 0 else 0
+            run = runs.setdefault(start, [start, d, []])
+            run[1] = max(run[1], d)
+            run[2].append(int(i))
+        return [tuple(r) for _, r in sorted(runs.items())]
+
+    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+        """Frames sampled every ``interval`` seconds (see module doc), in order."""
+        plan = self.plan(interval)
+        stats = SampleStats(mode=plan.mode)
+        self.last_stats = stats
+        if plan.indices.size == 0:
+            return
+        try:
+            container = av.open(str(self.path))
+        except (av.error.FFmpegError, OSError) as err:
+            raise InputError(f"{self.path}: cannot open the video ({_one_line(err)})") from None
+        try:
+            stream = container.streams.video[0]
+            stream.codec_context.thread_type = "AUTO"
+            packets = _PacketReader(container, stream, self.index, stats)
+            for first, last, picks in self._runs(plan.indices):
+                stats.runs.append((first, last))
+                wanted = {int(self.index.pts[i]): i for i in picks}
+                got: dict[int, np.ndarray] = {}
+                try:
+                    for packet in packets.run(first, last):
+                        stats.decoded += 1
+                        self._keep(stream.codec_context.decode(packet), wanted, got)
+                    self._keep(stream.codec_context.decode(None), wanted, got)
+                    stream.codec_context.flush_buffers()
+                except av.error.FFmpegError as err:
+                    raise InputError(f"{self.path}: video is damaged ({_one_line(err)})") from None
+                for i in picks:
+                    if i not in got:
+                        raise InputError(f"{self.path}: frame {i} cannot be decoded")
+                    where = f"{self.path}: frame {i}"
+                    check_equirectangular(got[i], where)
+                    stats.delivered += 1
+                    yield Frame(i, float(self.index.stamps[i]), got.pop(i))
+        finally:
+            container.close()
+
+    @staticmethod
+    def _keep(frames, wanted: dict[int, int], got: dict[int, np.ndarray]) -> None:
+        for frame in frames:
+            i = wanted.get(frame.pts)
+            if i is not None:
+                got[i] = frame.to_ndarray(format="rgb24")
+
+
+class _PacketReader:
+    """Packets of decode positions first..last, seeking forward over what is not needed."""
+
+    def __init__(self, container, stream, index: StreamIndex, stats: SampleStats) -> None:
+        self.container, self.stream, self.stats = container, stream, stats
+        self.dec_pts = np.empty(len(index), dtype=np.int64)
+        self.dec_pts[index.decode_pos] = index.pts
+        self.pos_of = {int(p): d for d, p in enumerate(self.dec_pts)}
+        self.demux = None
+        self.next_pos = 0  # decode position of the next packet self.demux yields
+
+    def _restart(self, first: int) -> None:
+        """Seek to the key frame at decode position ``first`` (from the start when it is 0)."""
+        if self.demux is not None:
+            self.stats.seeks += 1
+            target = int(self.dec_pts[first])
+            self.container.seek(target, stream=self.stream, backward=True, any_frame=False)
+        self.demux = self.container.demux(self.stream)
+        self.next_pos = -1  # unknown until the first packet
+
+    def run(self, first: int, last: int) -> Iterator:
+        if self.demux is None or self.next_pos != first:
+            self._restart(first)
+        retried = False
+        while True:
+            packet = next(self.demux, None)
+            if packet is None:
+                return
+            if packet.size == 0 or packet.pts is None:
+                continue
+            pos = self.pos_of.get(int(packet.pts))
+            if pos is None:
+                continue
+            if pos < first:
+                continue
+            if pos > first and self.next_pos == -1:
+                if retried:  # seek landed past the key frame twice: give up on this run
+                    return
+                retried = True
+                self.container.seek(0, stream=self.stream, backward=True, any_frame=False)
+                self.demux = self.container.demux(self.stream)
+                continue
+            self.next_pos = pos + 1
+            yield packet
+            if pos >= last:
+                return

@@ -1,0 +1,68 @@
+"""kill -9 at random moments loses no acknowledged decision (issue 16, finding 1).
+
+A real subprocess (tests/journal_writer.py) journals a decision every 20 ms and says
+``ack n`` once each is written; it is killed with SIGKILL at a random moment, 20 times
+in a row (each new process continues the same journal). Every acknowledged decision
+must be replayed, in order, and nothing is replayed twice. The one-decision-per-second
+version is ``benchmarks/kill_test.py``.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+from engine.journal import Journal
+
+WRITER = Path(__file__).resolve().parent / "journal_writer.py"
+ROOT = WRITER.parent.parent
+
+
+def run_and_kill(session: Path, period: float, lifetime: float) -> list[int]:
+    """Start a writer, kill -9 it after ``lifetime`` seconds of writing; the acks it gave."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen([sys.executable, str(WRITER), str(session), str(period)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    acks: list[int] = []
+    ready = threading.Event()
+
+    def read() -> None:
+        for line in proc.stdout:
+            if line.startswith("ready"):
+                ready.set()
+            elif line.startswith("ack "):
+                acks.append(int(line.split()[1]))
+        ready.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    assert ready.wait(30), "the writer did not start"
+    time.sleep(lifetime)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)
+    reader.join(10)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.read()[-2000:]
+    return acks
+
+
+def test_twenty_random_kills_lose_no_decision(tmp_path):
+    session = tmp_path / "walk.mp4.panotopo.json"
+    rng = random.Random()  # random moments on purpose: any moment must be safe
+    acked: list[int] = []
+    for _ in range(20):
+        acked += run_and_kill(session, period=0.02, lifetime=rng.uniform(0.03, 0.2))
+    journal = Journal.open(session)
+    try:
+        replayed = [r["decision"] for r in journal.replay()]
+    finally:
+        journal.close()
+    assert len(acked) > 40, "too few decisions were made to test anything"
+    lost = sorted(set(acked) - set(replayed))
+    assert lost == []
+    assert replayed == sorted(set(replayed))      # in order, none twice

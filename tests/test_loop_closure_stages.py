@@ -1,0 +1,75 @@
+"""Stages 5-8 of the verified method on plain arrays (engine.loop_closure)."""
+
+import numpy as np
+
+from engine.loop_closure import Matches, consistency, one_per_place, tiers
+from engine.params import MapParams
+
+P = MapParams()
+
+
+def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confidence=None, path=None):
+    n = len(a)
+    arr = lambda v, default, dt=np.float64: np.asarray(v if v is not None else [default] * n, dt)  # noqa: E731
+    return Matches(a=np.asarray(a, np.int64), b=np.asarray(b, np.int64), cosine=arr(None, 0.5, np.float32),
+                   score=arr(score, 0.0), support=arr(support, 0.0), direction=np.ones(n, np.int64),
+                   matches=arr(inliers, -1, np.int64) * 2, inliers=arr(inliers, -1, np.int64),
+                   inlier_ratio=arr(ratio, np.nan), yaw=arr(yaw, np.nan), path_inliers=arr(path, -1, np.int64),
+                   confidence=arr(confidence if confidence is not None else score, 0.0))
+
+
+def test_one_loop_per_place_keeps_the_most_confident_of_a_cluster_and_separate_places():
+    c = matches(a=[10, 11, 12, 50], b=[80, 81, 82, 120], score=[4, 6, 5, 4])
+    keep = one_per_place(c, radius=4)
+    assert keep.tolist() == [False, True, False, True]
+
+
+def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate():
+    c = matches(a=[0, 0, 0, 0], b=[20, 40, 60, 80],
+                score=[P.candidate_z + 0.5, P.candidate_z + 0.5, P.candidate_z - 0.5, 1.0],
+                inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05])
+    assert tiers(c, P).tolist() == ["auto", "candidate", "", ""]
+
+
+def test_geometry_no_stronger_than_between_path_neighbours_is_not_enough_for_an_automatic_loop():
+    # Two views 6 nodes apart along one street share as much as the loop's ends share with
+    # their own path neighbours: the same scene, not the same place.
+    strong = P.auto_inliers * 3
+    c = matches(a=[0, 30], b=[60, 90], score=[P.candidate_z + 1] * 2, inliers=[strong, strong],
+                ratio=[0.8, 0.8], path=[strong // 4, strong])
+    assert tiers(c, P).tolist() == ["auto", "candidate"]
+
+
+def test_without_geometry_only_score_and_support_together_make_an_automatic_loop():
+    c = matches(a=[0, 0, 0], b=[20, 40, 60], score=[P.auto_z + 1, P.auto_z + 1, P.candidate_z + 0.1],
+                support=[P.auto_support + 1, 0.0, P.auto_support + 1])
+    assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
+
+
+def test_a_loop_whose_heading_does_not_close_the_cycle_goes_back_to_the_candidates():
+    # The robot drives straight (headings 0) and returns on the same stretch the other way:
+    # true loops there have yaw 180. One loop claims yaw 90: it cannot be the same place
+    # seen with the heading the path says.
+    headings = np.zeros(200)
+    headings[100:] = 180.0
+    c = matches(a=[10, 14, 18, 22], b=[190, 186, 182, 178], score=[8, 7, 6, 9],
+                yaw=[180.0, 181.0, 178.0, 90.0], confidence=[8, 7, 6, 5])
+    status = np.array(["auto"] * 4, dtype=object)
+    out = consistency(c, status, headings, P)
+    assert out.tolist() == ["auto", "auto", "auto", "candidate"]
+
+
+def test_consistent_loops_far_apart_along_the_path_are_not_judged_against_each_other():
+    headings = np.linspace(0, 3000, 5000)     # lots of turning, lots of drift between them
+    c = matches(a=[10, 4000], b=[2000, 4900], score=[8, 7], yaw=[33.0, -120.0])
+    status = np.array(["auto", "auto"], dtype=object)
+    assert consistency(c, status, headings, P).tolist() == ["auto", "auto"]
+
+
+def test_the_consistent_majority_wins_over_one_more_confident_outlier():
+    headings = np.zeros(200)
+    headings[100:] = 180.0
+    c = matches(a=[10, 14, 18, 22], b=[190, 186, 182, 178], score=[5, 5, 5, 9],
+                yaw=[180.0, 181.0, 178.0, 90.0], confidence=[5, 5, 5, 9])
+    status = np.array(["auto"] * 4, dtype=object)
+    assert consistency(c, status, headings, P).tolist() == ["auto", "auto", "auto", "candidate"]

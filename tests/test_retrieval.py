@@ -1,0 +1,159 @@
+"""engine.retrieval: nearest distant rows, backgrounds and diagonal support without n x n arrays."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from engine import retrieval as R
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    return (x / np.linalg.norm(x, axis=1, keepdims=True)).astype(np.float32)
+
+
+def _random(n: int, d: int, seed: int = 0) -> np.ndarray:
+    return _unit(np.random.default_rng(seed).standard_normal((n, d)))
+
+
+def _brute(v: np.ndarray, k: int, exclude: int):
+    """Independent reference: full matrix, loop per row, sorted by similarity."""
+    n = v.shape[0]
+    sims = v.astype(np.float64) @ v.T.astype(np.float64)
+    idx = np.full((n, k), -1)
+    for i in range(n):
+        cand = [j for j in range(n) if abs(i - j) > exclude]
+        cand.sort(key=lambda j: -sims[i, j])
+        idx[i, :len(cand[:k])] = cand[:k]
+    return idx
+
+
+def _walk_with_revisits(n: int = 3000, d: int = 64, seed: int = 0):
+    """A smooth walk; rows [2000, 2200) revisit rows [300, 500) forward and rows
+    [2400, 2600) revisit rows [1000, 1200) in reverse, as noisy copies (cos ~0.9)."""
+    from engine.benchmark import random_walk_descriptors
+
+    rng = np.random.default_rng(seed)
+    x = random_walk_descriptors(n, d, seed, revisit_share=0.0)[0]
+    fwd = np.arange(300, 500)
+    rev = np.arange(1199, 999, -1)
+    x[2000:2200] = _unit(x[fwd] + 0.45 * rng.standard_normal((200, d)) / np.sqrt(d))
+    x[2400:2600] = _unit(x[rev] + 0.45 * rng.standard_normal((200, d)) / np.sqrt(d))
+    origin = np.full(n, -1)
+    origin[2000:2200] = fwd
+    origin[2400:2600] = rev
+    return x, origin
+
+
+def test_exact_blocked_search_equals_brute_force():
+    v = _random(300, 16, seed=3)
+    got = R.nearest(v, 7, 4, method="exact", block_rows=37)
+    want = _brute(v, 7, 4)
+    np.testing.assert_array_equal(got.index, want)
+    np.testing.assert_allclose(got.sim, np.take_along_axis(v @ v.T, want, axis=1), atol=1e-5)
+    assert np.all(np.diff(got.sim, axis=1) <= 1e-7)   # best first
+
+
+@pytest.mark.parametrize("block_rows", [1, 13, 64, 1000])
+def test_block_size_does_not_change_the_result(block_rows):
+    v = _random(200, 24, seed=1)
+    ref = R.nearest(v, 5, 3, method="exact", block_rows=200)
+    got = R.nearest(v, 5, 3, method="exact", block_rows=block_rows)
+    np.testing.assert_array_equal(got.index, ref.index)
+    np.testing.assert_allclose(got.sim, ref.sim, atol=1e-6)   # BLAS may round a 1-row block differently
+
+
+@pytest.mark.parametrize("method", ["exact", "approximate"])
+def test_temporal_neighbours_are_never_returned(method):
+    v, _ = _walk_with_revisits()
+    neigh = R.nearest(v, 10, 5, method=method)
+    rows = np.arange(v.shape[0])[:, None]
+    ok = neigh.index >= 0
+    assert np.all(np.abs(neigh.index - rows)[ok] > 5)
+
+
+def test_rows_with_too_few_distant_rows_are_padded():
+    v = _random(12, 8)
+    neigh = R.nearest(v, 10, 4, method="exact")
+    # Row 6 has rows 0, 1 and 11 outside |i - j| <= 4: three found, seven padded.
+    assert np.sum(neigh.index[6] >= 0) == 3
+    assert np.all(neigh.index[6, 3:] == -1) and np.all(np.isnan(neigh.sim[6, 3:]))
+
+
+def test_a_planted_revisit_is_among_the_neighbours():
+    v = _random(2000, 128, seed=5)
+    v[1500] = _unit(v[200:201] + 0.5 * np.random.default_rng(9).standard_normal((1, 128)) / np.sqrt(128))[0]
+    for method in ("exact", "approximate"):
+        neigh = R.nearest(v, 5, 5, method=method)
+        assert 200 in neigh.index[1500]
+        assert 1500 in neigh.index[200]
+
+
+def test_approximate_search_finds_most_planted_revisits():
+    # Bound 0.9: the inverted file probes NPROBE cells; a revisit (cos ~0.9) falls in a
+    # cell next to its original almost always.
+    v, origin = _walk_with_revisits()
+    neigh = R.nearest(v, 10, 5, method="approximate")
+    rows = np.flatnonzero(origin >= 0)
+    found = np.mean([origin[i] in neigh.index[i] for i in rows])
+    assert found >= 0.9
+
+
+def test_diagonal_support_is_high_along_planted_stretches_and_low_elsewhere():
+    v, origin = _walk_with_revisits()
+    stats = R.background(v, 5)
+    a = np.array([400, 1100])       # middle of the forward and of the reverse stretch
+    b = np.array([2100, 2499])
+    fwd, n_fwd = R.diagonal_support(v, stats, a[:1], b[:1], half=10, direction=1)
+    rev, n_rev = R.diagonal_support(v, stats, a[1:], b[1:], half=10, direction=-1)
+    assert n_fwd[0] == 20 and n_rev[0] == 20
+    assert fwd[0] > 3.0 and rev[0] > 3.0
+    # The wrong direction along the same pairs is not supported.
+    wrong, _ = R.diagonal_support(v, stats, a[:1], b[:1], half=10, direction=-1)
+    assert wrong[0] < fwd[0] - 2.0
+    rng = np.random.default_rng(2)
+    ra, rb = rng.integers(0, 1900, 200), rng.integers(2700, 3000, 200)
+    rand, _ = R.diagonal_support(v, stats, ra, rb, half=10, direction=1)
+    assert np.median(rand) < 1.0
+
+
+def test_diagonal_support_skips_pairs_outside_and_near_in_time():
+    v = _random(50, 8)
+    stats = R.background(v, 3)
+    _, count = R.diagonal_support(v, stats, np.array([0, 20]), np.array([49, 24]), half=5, direction=1)
+    assert count[0] == 0      # (0 + t, 49 + t) stays inside only for t < 0, and then a + t < 0
+    # (20 + t, 24 + t) are always 4 apart (> 3): all ten pairs count.
+    assert count[1] == 10
+
+
+def test_calibrated_scores_are_symmetric_and_a_revisit_stands_out():
+    v, origin = _walk_with_revisits()
+    stats = R.background(v, 5)
+    assert stats.mean.shape == (v.shape[0],) and np.all(stats.std > 0)
+    a, b = np.array([2100, 50]), np.array([origin[2100], 2900])
+    np.testing.assert_allclose(R.pair_z(v, stats, a, b), R.pair_z(v, stats, b, a), rtol=1e-5)
+    neigh = R.nearest(v, 3, 5, method="exact")
+    z = R.calibrated(neigh, stats)
+    assert z[2100, 0] > 4.0        # the revisit, many background spreads above a different place
+    assert np.nanmedian(z[100:300, 0]) < z[2100, 0]
+
+
+def test_pair_similarities_are_row_cosines():
+    v = _random(40, 6)
+    a, b = np.array([0, 5, 39]), np.array([1, 30, 2])
+    np.testing.assert_allclose(R.pair_similarities(v, a, b), np.sum(v[a] * v[b], axis=1), atol=1e-6)
+
+
+def test_block_rows_keep_a_block_under_the_element_budget():
+    for n in (1, 10, 5000, 100_000, 10_000_000):
+        rows = R.block_rows_for(n)
+        assert rows >= 1
+        assert rows * n <= max(R.BLOCK_ELEMENTS, n)   # one row always fits
+    assert R.BLOCK_ELEMENTS * 12 <= 400e6               # float32 sims + int64 argpartition: < 400 MB
+
+
+def test_auto_is_exact_when_small_and_approximate_when_large():
+    assert R.choose_method(5000, 1024) == "exact"
+    assert R.choose_method(100_000, 1024) == "approximate"
+    with pytest.raises(ValueError):
+        R.nearest(_random(10, 4), 2, 1, method="fast")

@@ -1,0 +1,150 @@
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from engine.features import FeatureTable, LocalFeatures, extract
+from engine.shift import apply_shift, canonical_shift, relative_yaw
+from engine.sphere import (MODEL_CODES, bearings, to_uv, two_view, verify_pairs, yaw_of_originals,
+                           yaw_of_rotation)
+
+DATA = Path(__file__).parent / "data"
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
+if not SHARED.exists():
+    SHARED = Path("/work/shared/data")
+GOPRO = SHARED / "real" / "panoramax-gopromax"
+
+
+def _read(path, width=1024):
+    rgb = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+    if rgb.shape[1] > width:
+        rgb = cv2.resize(rgb, (width, width // 2), interpolation=cv2.INTER_AREA)
+    return rgb
+
+
+@pytest.fixture(scope="module")
+def pano():
+    return _read(DATA / "examplepano_1024.jpg")
+
+
+def _angle_deg(r1, r2):
+    return float(np.degrees(np.arccos(np.clip((np.trace(r1.T @ r2) - 1) / 2, -1, 1))))
+
+
+def _wrap(deg):
+    return (deg + 180.0) % 360.0 - 180.0
+
+
+def test_bearings_are_unit_vectors_forward_at_the_centre_and_up_at_the_top():
+    uv = np.random.default_rng(0).random((50, 2))
+    x = bearings(uv)
+    assert np.allclose(np.linalg.norm(x, axis=1), 1)
+    assert np.allclose(to_uv(x), uv, atol=1e-9)
+    assert np.allclose(bearings([[0.5, 0.5], [0.75, 0.5], [0.3, 0.0]]),
+                       [[1, 0, 0], [0, -1, 0], [0, 0, 1]], atol=1e-9)   # forward, right, up
+
+
+@pytest.mark.parametrize("k", [100, -237, 400])
+def test_a_rolled_real_panorama_is_a_rotation_with_the_relative_yaw_convention(pano, k):
+    rolled = np.roll(pano, -k, axis=1)
+    tv = two_view(extract(pano), extract(rolled))
+    assert tv.model == "rotation"
+    assert tv.inliers > 100 and tv.inlier_ratio > 0.8
+    want, _ = relative_yaw(pano, rolled)
+    assert abs(_wrap(tv.yaw_deg - want)) < 2.0
+    assert abs(_wrap(tv.yaw_deg - yaw_of_rotation(tv.rotation))) < 1e-9
+    assert tv.uv_a.shape == tv.uv_b.shape == (tv.matches, 2) and tv.inlier_mask.shape == (tv.matches,)
+
+
+def test_yaw_of_the_original_frames_from_shifted_ones(pano):
+    b = np.roll(pano, 333, axis=1)
+    sa, sb = canonical_shift(pano), canonical_shift(b)
+    tv = two_view(extract(apply_shift(pano, sa)), extract(apply_shift(b, sb)))
+    got = yaw_of_originals(tv.yaw_deg, sa, sb, pano.shape[1])
+    want, _ = relative_yaw(pano, b)
+    assert abs(_wrap(got - want)) < 2.0
+    arr = yaw_of_originals(np.array([tv.yaw_deg, np.nan]), np.array([sa, 0]), np.array([sb, 0]), pano.shape[1])
+    assert abs(_wrap(arr[0] - want)) < 2.0 and np.isnan(arr[1])
+
+
+def _rot(axis, deg):
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    r = np.eye(3)
+    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+    return r
+
+
+def _synthetic_pair(seed, outliers=0.3, n=250):
+    """Points 2-10 m around camera a; camera b 1 m away and turned; matches known, 30 % wrong."""
+    rng = np.random.default_rng(seed)
+    dirs = bearings(np.stack([rng.random(n), rng.uniform(0.1, 0.8, n)], axis=1))
+    xa = dirs * rng.uniform(2.0, 10.0, (n, 1))
+    r = _rot(2, 40.0) @ _rot(0, 3.0) @ _rot(1, -2.0)
+    t = np.array([0.8, -0.5, 0.1])
+    xb = xa @ r.T + t
+    uv_a = to_uv(xa) + rng.normal(0, 3e-4, (n, 2))
+    uv_b = to_uv(xb) + rng.normal(0, 3e-4, (n, 2))
+    bad = rng.random(n) < outliers
+    uv_b[bad] = np.stack([rng.random(bad.sum()), rng.uniform(0.1, 0.8, bad.sum())], axis=1)
+    desc = rng.integers(0, 256, (n, 128)).astype(np.uint8)
+    fa = LocalFeatures((uv_a % 1).astype(np.float32), desc)
+    fb = LocalFeatures((uv_b % 1).astype(np.float32), desc)
+    return fa, fb, r, t / np.linalg.norm(t), bad
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_moving_camera_is_an_essential_model_with_its_rotation(seed):
+    fa, fb, r, t, bad = _synthetic_pair(seed)
+    tv = two_view(fa, fb)
+    assert tv.model == "essential"
+    assert _angle_deg(tv.rotation, r) < 1.0
+    assert float(tv.translation @ t) > np.cos(np.radians(5))
+    assert abs(_wrap(tv.yaw_deg - yaw_of_rotation(r))) < 1.0
+    # The inliers are the true matches.
+    assert np.mean(tv.inlier_mask[~bad]) > 0.9 and np.mean(tv.inlier_mask[bad]) < 0.1
+
+
+def test_same_seed_same_result():
+    fa, fb, *_ = _synthetic_pair(3)
+    one, two = two_view(fa, fb, seed=5), two_view(fa, fb, seed=5)
+    assert one.inliers == two.inliers and np.array_equal(one.inlier_mask, two.inlier_mask)
+    assert np.array_equal(one.rotation, two.rotation)
+
+
+def _unrelated_images(pano):
+    yield np.roll(pano[::-1], 300, axis=1)               # upside down and turned
+    pixel = SHARED / "real" / "pixel3-photosphere.jpg"
+    if pixel.exists():
+        yield _read(pixel)
+
+
+def test_unrelated_images_have_far_fewer_inliers_than_a_true_pair(pano):
+    fa = extract(pano)
+    true = two_view(fa, extract(np.roll(pano, 123, axis=1)))
+    for other in _unrelated_images(pano):
+        tv = two_view(fa, extract(other))
+        assert tv.inliers * 5 < true.inliers
+
+
+@pytest.mark.skipif(not GOPRO.exists(), reason="shared real data absent")
+def test_a_real_step_of_one_metre_is_found_and_a_different_place_is_not():
+    """panoramax-gopromax 1 -> 2 is a ~1 m walk along a road; 1 vs 5 is ~9 m further."""
+    f = {i: extract(_read(GOPRO / f"{i}.jpg")) for i in (1, 2, 5)}
+    near = two_view(f[1], f[2])
+    assert near.model in ("essential", "rotation") and near.inliers >= 30
+    far = two_view(f[1], f[5])
+    assert far.inliers < near.inliers
+
+
+def test_verify_pairs_gives_one_row_per_pair(pano):
+    rolled = np.roll(pano, 200, axis=1)
+    table = FeatureTable.from_list([extract(pano), extract(rolled), extract(np.roll(pano[::-1], 50, axis=1)),
+                                    LocalFeatures(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.uint8))])
+    out = verify_pairs(table, np.array([0, 0, 0]), np.array([1, 2, 3]))
+    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model"}
+    assert all(v.shape == (3,) for v in out.values())
+    assert out["model"][0] == MODEL_CODES["rotation"] and out["inliers"][0] > 5 * out["inliers"][1]
+    assert abs(_wrap(out["yaw_deg"][0] - relative_yaw(pano, rolled)[0])) < 2.0
+    assert out["model"][2] == MODEL_CODES["none"] and np.isnan(out["yaw_deg"][2]) and out["matches"][2] == 0
