@@ -21,6 +21,7 @@ from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDia
                                QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget)
 
 from engine.errors import InputError
+from engine.journal import Journal, JournalLocked, journal_session_path
 from engine.params import MapParams
 from engine.session import Session, autosave_path_for, is_session_file, session_path_for
 
@@ -449,10 +450,6 @@ class MainWindow(QMainWindow):
         The document appends every decision record to it (``MapDocument.record_decision``).
         """
         if not self.interactive:  # a screenshot or scripted run neither takes nor writes the user's journal
-            return True
-        try:
-            from engine.journal import Journal, JournalLocked, journal_session_path
-        except ImportError:  # an engine without the journal: decisions are kept by autosave only
             return True
         old = self.doc.journal
         if old is not None and old.session_path == journal_session_path(p):
