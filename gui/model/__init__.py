@@ -15,8 +15,8 @@ tests/test_layers.py), so the model is tested in plain Python (tests/test_app_mo
 
 from .commands import AddManualLoop, RemoveLoop, SetLabel, SetStatuses
 from .document import LoopKey, LoopRow, MapDocument
-from .history import Command, History, Macro
+from .history import Command, History
 from .queue import ReviewQueue
 
-__all__ = ["AddManualLoop", "Command", "History", "LoopKey", "LoopRow", "Macro", "MapDocument", "RemoveLoop",
+__all__ = ["AddManualLoop", "Command", "History", "LoopKey", "LoopRow", "MapDocument", "RemoveLoop",
            "ReviewQueue", "SetLabel", "SetStatuses"]

@@ -1,15 +1,15 @@
 """Undo and redo of plain command objects (no Qt).
 
 A ``Command`` knows how to apply itself to a model (``redo``) and how to take itself
-back (``undo``). ``History`` is the undo stack: ``push`` applies and records, a bulk
-action is one command (``Macro`` or a command over many loops), so it is one undo
-step. The Qt window shows the same commands through a QUndoStack adapter
-(``gui.commands.QtHistory``), which offers the same ``push``.
+back (``undo``). ``History`` is the undo stack: ``push`` applies and records. A bulk
+action is one command over many loops, so it is one undo step. The Qt window shows
+the same commands through a QUndoStack adapter (``gui.commands.QtHistory``), which
+offers the same ``push``.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional
 
 
 class Command:
@@ -22,22 +22,6 @@ class Command:
 
     def undo(self, model) -> None:
         raise NotImplementedError
-
-
-class Macro(Command):
-    """Several commands as one undo step (undone in reverse order)."""
-
-    def __init__(self, text: str, parts: Sequence[Command]) -> None:
-        self.text = text
-        self.parts = list(parts)
-
-    def redo(self, model) -> None:
-        for part in self.parts:
-            part.redo(model)
-
-    def undo(self, model) -> None:
-        for part in reversed(self.parts):
-            part.undo(model)
 
 
 class History:

@@ -24,10 +24,6 @@ class Similarity:
     preview: np.ndarray      # (k, k) block maxima, k <= PREVIEW_SIDE (the matrix itself when small)
     floor: float             # the colour scale's low end
 
-    @property
-    def size(self) -> int:
-        return int(self.matrix.shape[0])
-
 
 def compute(vectors: np.ndarray) -> Similarity:
     from engine.loops import similarity_matrix
