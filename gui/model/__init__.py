@@ -10,7 +10,9 @@ tests/test_layers.py), so the model is tested in plain Python (tests/test_app_mo
 * ``commands``: the decisions as commands (status, manual loops, labels).
 * ``queue``: the review queue (``ReviewQueue``): ranking, filters, counts, bulk actions.
 * ``keys``: the one table of keyboard shortcuts.
-* ``journal``: decision records (what a write-through journal stores) and their replay.
+* ``journal``: decision records (what the write-through journal stores) and their replay.
+* ``similarity``: the node similarity matrix with a picture-sized preview.
+* ``loop_key``: loops addressed by the source frames of their two nodes.
 """
 
 from .commands import AddManualLoop, RemoveLoop, SetLabel, SetStatuses
