@@ -77,6 +77,23 @@ class Evaluation:
     dist_th: float = 1.0
     neighbor_node_num: int = 0
 
+    def undefined(self) -> tuple[str, ...]:
+        """The ratios with a zero denominator (no detections: precision; no positives: recall).
+
+        Their stored value is 0.0 (kept for old readers); shown, they read "n/a", not 0 %.
+        """
+        denominators = {"precision": self.tp + self.fp, "recall": self.tp + self.fn,
+                        "accuracy": self.tp + self.fp + self.tn + self.fn,
+                        "f1": 2 * self.tp + self.fp + self.fn}
+        return tuple(name for name, den in denominators.items() if den == 0)
+
+    def ratio_text(self, name: str, percent: bool = False, digits: int = 3) -> str:
+        """``name`` ("precision", "recall", "accuracy", "f1") as text: "n/a" when undefined."""
+        if name in self.undefined():
+            return "n/a"
+        value = float(getattr(self, name))
+        return f"{100 * value:.{max(digits - 2, 0)}f} %" if percent else f"{value:.{digits}f}"
+
     @property
     def event_coverage(self) -> float:
         return self.events_found / self.events_total if self.events_total else 0.0

@@ -92,8 +92,9 @@ def plot_map(topomap: TopoMap, poses: Optional[Poses], evaluation: Optional[Eval
     ax.set_aspect("equal" if metric else "auto", adjustable="datalim")
     title = "map on ground-truth positions (m)" if metric else "map (graph layout, no positions)"
     if evaluation is not None:
-        title += (f"\nprecision {evaluation.precision:.2f}  recall {evaluation.recall:.2f}  "
-                  f"F1 {evaluation.f1:.2f}  events {evaluation.events_found}/{evaluation.events_total}")
+        title += (f"\nprecision {evaluation.ratio_text('precision', digits=2)}  "
+                  f"recall {evaluation.ratio_text('recall', digits=2)}  "
+                  f"F1 {evaluation.ratio_text('f1', digits=2)}  events {evaluation.events_found}/{evaluation.events_total}")
     ax.set_title(title, fontsize=10)
     if not metric:
         ax.set_xticks([])

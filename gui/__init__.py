@@ -2,4 +2,7 @@
 
 from .qt_compat import protect_bools
 
-protect_bools()  # before any signal is emitted (see gui/qt_compat.py)
+try:
+    protect_bools()  # before any signal is emitted (see gui/qt_compat.py)
+except ImportError:  # no Qt at all (gui.model used on its own): nothing to protect
+    pass

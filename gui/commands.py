@@ -1,73 +1,43 @@
-"""Undoable edits (QUndoCommand): every decision and every edit goes through one.
+"""The Qt face of the undo history: plain commands (``gui.model.commands``) on a QUndoStack.
 
-Commands address loops and nodes by source frames (see ``gui.document``), so a
-command still finds its loop after a parameter change rebuilt the map.
+The decisions themselves are Qt-free command objects; ``QtHistory`` gives the
+document a ``push`` that runs them through the window's QUndoStack (its Edit menu,
+clean state and title asterisk). Parameter changes stay a QUndoCommand here: they
+rebuild the map through the window.
 """
 
 from __future__ import annotations
 
-from typing import Callable, Optional
+from typing import Callable
 
-from PySide6.QtGui import QUndoCommand
+from PySide6.QtGui import QUndoCommand, QUndoStack
 
-from .document import Document, LoopKey
+from .model.history import Command
 
 # Merge ids: consecutive edits of the same parameter become one undo step.
 PARAMS_MERGE_ID = 1001
 
 
-class SetLoopStatus(QUndoCommand):
-    def __init__(self, doc: Document, key: LoopKey, old: str, new: str) -> None:
-        super().__init__(f"{_verb(new)} loop {key[0]}–{key[1]}")
-        self.doc, self.key, self.old, self.new = doc, key, old, new
+class _Adapter(QUndoCommand):
+    def __init__(self, command: Command, model) -> None:
+        super().__init__(command.text)
+        self.command, self.model = command, model
 
     def redo(self) -> None:
-        self.doc.set_loop_status(self.key, self.new)
+        self.command.redo(self.model)
 
     def undo(self) -> None:
-        self.doc.set_loop_status(self.key, self.old)
+        self.command.undo(self.model)
 
 
-class AddManualLoop(QUndoCommand):
-    def __init__(self, doc: Document, key: LoopKey, yaw: Optional[float] = None) -> None:
-        super().__init__(f"Add manual loop {key[0]}–{key[1]}")
-        self.doc, self.key, self.yaw = doc, key, yaw
+class QtHistory:
+    """What ``MapDocument.history`` needs (``push``), backed by a QUndoStack."""
 
-    def redo(self) -> None:
-        self.doc.add_manual_loop(self.key, yaw=self.yaw)
+    def __init__(self, stack: QUndoStack, model) -> None:
+        self.stack, self.model = stack, model
 
-    def undo(self) -> None:
-        self.doc.remove_loop(self.key)
-
-
-class RemoveLoop(QUndoCommand):
-    """Removes a (manual) loop; undo puts it back with its attributes."""
-
-    def __init__(self, doc: Document, key: LoopKey) -> None:
-        super().__init__(f"Remove loop {key[0]}–{key[1]}")
-        self.doc, self.key = doc, key
-        attrs = doc.loop_attrs(key) or {}
-        self.yaw = attrs.get("yaw")
-        self.similarity = attrs.get("similarity")
-        self.status = attrs.get("status", "manual")
-
-    def redo(self) -> None:
-        self.doc.remove_loop(self.key)
-
-    def undo(self) -> None:
-        self.doc.add_manual_loop(self.key, yaw=self.yaw, similarity=self.similarity, status=self.status)
-
-
-class SetLabel(QUndoCommand):
-    def __init__(self, doc: Document, frame: int, old: str, new: str) -> None:
-        super().__init__(f"Name place at frame {frame} '{new}'" if new else f"Clear place name at frame {frame}")
-        self.doc, self.frame, self.old, self.new = doc, frame, old, new
-
-    def redo(self) -> None:
-        self.doc.set_label(self.frame, self.new)
-
-    def undo(self) -> None:
-        self.doc.set_label(self.frame, self.old)
+    def push(self, command: Command) -> None:
+        self.stack.push(_Adapter(command, self.model))
 
 
 class ChangeParams(QUndoCommand):
@@ -91,7 +61,3 @@ class ChangeParams(QUndoCommand):
 
     def undo(self) -> None:
         self.apply(self.new, self.old)
-
-
-def _verb(status: str) -> str:
-    return {"confirmed": "Confirm", "rejected": "Reject", "auto": "Reset", "manual": "Mark manual"}.get(status, status)

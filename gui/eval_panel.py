@@ -77,7 +77,7 @@ class EvalPanel(QWidget):
             elif key in ("tp", "fp", "tn", "fn"):
                 self.values[key].setText(f"<b>{getattr(ev, key)}</b>")
             else:
-                self.values[key].setText(f"<b>{100 * getattr(ev, key):.1f} %</b>")
+                self.values[key].setText(f"<b>{ev.ratio_text(key, percent=True)}</b>")  # "n/a" if undefined
         if ev is None:
             self.events.setText("—")
         else:

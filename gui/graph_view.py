@@ -108,7 +108,8 @@ class GraphView(QWidget):
             self.x = self.y = np.zeros(0)
         else:
             positions = self.doc.topomap.positions() if self.doc.poses is not None else None
-            self.x, self.y = positions if positions is not None else path_layout(self.doc.topomap)
+            self.x, self.y = (positions if positions is not None  # layout computed with the map, off the UI thread
+                              else self.doc.prepared("layout", path_layout))
         with_gt = self.doc.poses is not None and self.doc.has_map
         self.plot.setLabel("bottom", "x (m)" if with_gt else "")
         self.plot.setLabel("left", "y (m)" if with_gt else "")

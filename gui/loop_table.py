@@ -1,7 +1,10 @@
-"""The loop candidate table: a model over the map's loop arcs, sorting and a status filter.
+"""The review queue as a table: every loop ranked by evidence, filters, counts, multi-select.
 
-Keyboard curation happens here: C/Y confirm, R/N reject, Backspace/U reset,
-J/PgDn next, K/PgUp previous (the window's menu actions carry the same keys).
+The ranking, the counts and the decisions live in the Qt-free ``gui.model.queue``;
+this widget shows them. Rows can be multi-selected (Shift/Ctrl+click, Ctrl+A) and a
+decision key applies to every selected row, as one undo step. The keys themselves
+are the window's actions (``gui.model.keys``); the table takes no letters of its own,
+and Tab leaves it (no focus trap).
 """
 
 from __future__ import annotations
@@ -9,33 +12,40 @@ from __future__ import annotations
 import math
 from typing import Any, Optional
 
-from PySide6.QtCore import (QAbstractTableModel, QItemSelectionModel, QModelIndex,
+from PySide6.QtCore import (QAbstractTableModel, QItemSelection, QItemSelectionModel, QModelIndex,
                             QSortFilterProxyModel, Qt, Signal)
-from PySide6.QtGui import QBrush, QColor, QKeyEvent
+from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QHBoxLayout, QHeaderView, QLabel, QSizePolicy,
                                QTableView, QVBoxLayout, QWidget)
 
 from .document import Document, LoopKey, LoopRow
+from .model.queue import KINDS, ReviewQueue, rank_key
 from .style import STATUS_COLORS
 
-COLUMNS = ("Query", "Match", "Frames", "Sim.", "Win.", "Yaw°", "Status")
+COLUMNS = ("#", "Status", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
 COLUMN_TIPS = (
-    "Query: the earlier node of the pair",
-    "Match: the later node of the pair (the loop candidate)",
-    "Source frames of the two nodes",
+    "Rank by evidence: the engine's confidence (else calibrated score, else similarity), then inliers",
+    "candidate = found, waiting for you; auto = accepted automatically; confirmed / rejected by you; "
+    "manual = added by you",
+    "Query: the earlier node of the pair (source frame in the tooltip)",
+    "Match: the later node of the pair",
+    "Calibrated descriptor score (standard deviations above the recording's background), where known",
+    "Geometric inliers (and their ratio in the tooltip), where verified",
     "Similarity: cosine of the two node descriptors",
-    "Window count: matches in the best candidate window of the spatial consistency check ('ours')",
-    "Relative heading between the two panoramas, in degrees",
-    "auto = waiting for a decision; confirmed / rejected by you; manual = added by you",
+    "Relative heading between the two panoramas, in degrees (~: estimated from the images)",
 )
-STATUS_COLUMN = 6
-FILTERS = (("All loops", None), ("Undecided (auto)", {"auto"}), ("Confirmed", {"confirmed"}),
-           ("Rejected", {"rejected"}), ("Manual", {"manual"}), ("Kept (confirmed + manual)", {"confirmed", "manual"}))
+RANK_COLUMN, STATUS_COLUMN = 0, 1
+FILTERS = (("All loops", None), ("Undecided (candidate + auto)", {"candidate", "auto"}),
+           ("Candidates", {"candidate"}), ("Auto", {"auto"}), ("Confirmed", {"confirmed"}),
+           ("Rejected", {"rejected"}), ("Manual", {"manual"}), ("Kept (auto + confirmed + manual)",
+                                                                  {"auto", "confirmed", "manual"}))
+KIND_FILTERS = (("Any kind", None),) + tuple((f"Found as {k}", {k}) for k in KINDS)
 KEY_ROLE = Qt.UserRole + 1
+FALLBACK_COLOR = "#95a5a6"
 
-DECISION_KEYS = {Qt.Key_C: "confirmed", Qt.Key_Y: "confirmed", Qt.Key_R: "rejected",
-                 Qt.Key_N: "rejected", Qt.Key_Backspace: "auto", Qt.Key_U: "auto"}
-NEXT_KEYS = {Qt.Key_J: 1, Qt.Key_PageDown: 1, Qt.Key_K: -1, Qt.Key_PageUp: -1}
+
+def status_color(status: str) -> str:
+    return STATUS_COLORS.get(status, FALLBACK_COLOR)
 
 
 class LoopTableModel(QAbstractTableModel):
@@ -43,11 +53,14 @@ class LoopTableModel(QAbstractTableModel):
         super().__init__()
         self.doc = doc
         self.rows: list[LoopRow] = []
+        self.rank: dict[LoopKey, int] = {}
         self._row_of: dict[LoopKey, int] = {}
 
     def refresh(self) -> None:
         """Re-read the loops; a status change only repaints, a new set resets."""
-        rows = self._sorted(self.doc.loop_rows())
+        source = self.doc.loop_rows()
+        self.rank = {r.key: i + 1 for i, r in enumerate(sorted(source, key=rank_key))}
+        rows = self._sorted(source)
         if [r.key for r in rows] == [r.key for r in self.rows]:
             self.rows = rows
             if rows:
@@ -60,13 +73,15 @@ class LoopTableModel(QAbstractTableModel):
 
     # Sorting happens here, in Python's sort over plain values, not in the proxy: a
     # proxy sort calls data() through Qt for every comparison (seconds for 10^4 loops).
-    sort_column = 0
+    sort_column = RANK_COLUMN
     sort_order = Qt.AscendingOrder
 
     def _sort_value(self, r: LoopRow, col: int):
         yaw = r.yaw if r.yaw is not None else self.doc.estimated_yaws.get(r.key)
-        return ((r.index_u, r.index_v), (r.index_v, r.index_u), r.key, _num(r.similarity), r.window_count,
-                _num(yaw), r.status)[col]
+        if col == RANK_COLUMN:
+            return self.rank.get(r.key, 0)
+        return (None, r.status, (r.index_u, r.index_v), (r.index_v, r.index_u), _num(r.score),
+                -1 if r.inliers is None else r.inliers, _num(r.similarity), _num(yaw))[col]
 
     def _sorted(self, rows: list[LoopRow]) -> list[LoopRow]:
         return sorted(rows, key=lambda r: self._sort_value(r, self.sort_column),
@@ -85,7 +100,7 @@ class LoopTableModel(QAbstractTableModel):
     def yaw_changed(self, key: LoopKey) -> None:
         row = self._row_of.get(key)
         if row is not None:
-            self.dataChanged.emit(self.index(row, 5), self.index(row, 5))
+            self.dataChanged.emit(self.index(row, 7), self.index(row, 7))
 
     def row_of(self, key: LoopKey) -> Optional[int]:
         return self._row_of.get(key)
@@ -112,37 +127,58 @@ class LoopTableModel(QAbstractTableModel):
         if role == KEY_ROLE:
             return r.key
         if role == Qt.DisplayRole:
-            if col == 5 and r.yaw is None and r.key in self.doc.estimated_yaws:
+            if col == 7 and r.yaw is None and r.key in self.doc.estimated_yaws:
                 return f"~{self.doc.estimated_yaws[r.key]:+.1f}"  # estimated from the images
             return self._display(r, col)
         if role == Qt.TextAlignmentRole and col != STATUS_COLUMN:
             return int(Qt.AlignRight | Qt.AlignVCenter)
         if role == Qt.BackgroundRole and col == STATUS_COLUMN:
-            c = QColor(STATUS_COLORS.get(r.status, "#fff"))
+            c = QColor(status_color(r.status))
             c.setAlpha(70)
             return QBrush(c)
         if role == Qt.ToolTipRole:
-            label_u = self.doc.label_of_frame(r.key[0])
-            label_v = self.doc.label_of_frame(r.key[1])
-            names = f" ({label_u or '?'} ↔ {label_v or '?'})" if (label_u or label_v) else ""
-            return f"{r.u} ↔ {r.v}{names}: similarity {r.similarity:.3f}, status {r.status}"
+            return self._tooltip(r)
         return None
 
-    @staticmethod
-    def _display(r: LoopRow, col: int) -> str:
-        if col == 0:
-            return r.u
-        if col == 1:
-            return r.v
+    def _display(self, r: LoopRow, col: int) -> str:
+        if col == RANK_COLUMN:
+            return str(self.rank.get(r.key, ""))
+        if col == STATUS_COLUMN:
+            return r.status
         if col == 2:
-            return f"{r.key[0]} ↔ {r.key[1]}"
+            return r.u
         if col == 3:
-            return "—" if math.isnan(r.similarity) else f"{r.similarity:.3f}"
+            return r.v
         if col == 4:
-            return str(r.window_count) if r.window_count else "—"
+            return "—" if r.score is None else f"{r.score:.3f}"
         if col == 5:
-            return "—" if r.yaw is None else f"{r.yaw:+.1f}"
-        return r.status
+            return "—" if r.inliers is None else str(r.inliers)
+        if col == 6:
+            return "—" if math.isnan(r.similarity) else f"{r.similarity:.3f}"
+        return "—" if r.yaw is None else f"{r.yaw:+.1f}"
+
+    def _tooltip(self, r: LoopRow) -> str:
+        label_u = self.doc.label_of_frame(r.key[0])
+        label_v = self.doc.label_of_frame(r.key[1])
+        names = f" ({label_u or '?'} ↔ {label_v or '?'})" if (label_u or label_v) else ""
+        parts = [f"{r.u} ↔ {r.v}{names}, frames {r.key[0]} ↔ {r.key[1]}",
+                 f"status {r.status} (found as {r.tier})", f"similarity {r.similarity:.3f}"]
+        if r.score is not None:
+            parts.append(f"score {r.score:.3f}")
+        if r.inliers is not None:
+            ratio = f" ({100 * r.inlier_ratio:.0f} %)" if r.inlier_ratio is not None else ""
+            parts.append(f"{r.inliers} inliers{ratio}")
+        if r.matches is not None:
+            parts.append(f"{r.matches} feature matches")
+        if r.support is not None:
+            parts.append(f"sequence support {r.support:.2f}")
+        if r.direction is not None:
+            parts.append("travelled the same way" if r.direction > 0 else "travelled the other way")
+        if r.confidence is not None:
+            parts.append(f"confidence {r.confidence:.3f} (the rank)")
+        if r.window_count:
+            parts.append(f"window count {r.window_count}")
+        return "\n".join(parts)
 
 
 def _num(x: Optional[float]) -> float:
@@ -153,50 +189,38 @@ class LoopFilterProxy(QSortFilterProxyModel):
     def __init__(self) -> None:
         super().__init__()
         self.statuses: Optional[set[str]] = None
+        self.kinds: Optional[set[str]] = None
 
     def sort(self, column: int, order=Qt.AscendingOrder) -> None:
         """Sort the source model (fast); this proxy keeps its order and only filters."""
         self.sourceModel().sort(column, order)
 
-    def set_statuses(self, statuses: Optional[set[str]]) -> None:
+    def set_filter(self, statuses: Optional[set[str]], kinds: Optional[set[str]] = None) -> None:
         if hasattr(self, "beginFilterChange"):  # Qt >= 6.10; invalidateFilter is deprecated there
             self.beginFilterChange()
-            self.statuses = statuses
+            self.statuses, self.kinds = statuses, kinds
             self.endFilterChange()
         else:
-            self.statuses = statuses
+            self.statuses, self.kinds = statuses, kinds
             self.invalidateFilter()
 
+    def set_statuses(self, statuses: Optional[set[str]]) -> None:
+        self.set_filter(statuses, self.kinds)
+
     def refilter(self) -> None:
-        self.set_statuses(self.statuses)
+        self.set_filter(self.statuses, self.kinds)
 
     def filterAcceptsRow(self, source_row: int, source_parent: QModelIndex) -> bool:
-        if self.statuses is None:
-            return True
-        return self.sourceModel().rows[source_row].status in self.statuses
-
-
-class LoopTableView(QTableView):
-    """The table; curation keys are handled here when the window's shortcuts do not fire."""
-
-    decide = Signal(str)
-    stepRequested = Signal(int)
-
-    def keyPressEvent(self, event: QKeyEvent) -> None:
-        if event.modifiers() & (Qt.ControlModifier | Qt.AltModifier):
-            return super().keyPressEvent(event)
-        if event.key() in DECISION_KEYS:
-            self.decide.emit(DECISION_KEYS[event.key()])
-        elif event.key() in NEXT_KEYS:
-            self.stepRequested.emit(NEXT_KEYS[event.key()])
-        else:
-            super().keyPressEvent(event)
+        row = self.sourceModel().rows[source_row]
+        return ((self.statuses is None or row.status in self.statuses)
+                and (self.kinds is None or row.tier in self.kinds))
 
 
 class LoopTable(QWidget):
-    """Filter bar, counts and the table; emits the selected loop key (or None)."""
+    """Filter bar, counts and the table; emits the current loop key (or None)."""
 
     loopSelected = Signal(object)
+    selectionChanged = Signal()
 
     def __init__(self, doc: Document, parent: Optional[QWidget] = None) -> None:
         super().__init__(parent)
@@ -210,36 +234,44 @@ class LoopTable(QWidget):
         for text, _statuses in FILTERS:
             self.filter.addItem(text)
         self.filter.currentIndexChanged.connect(self._filter_changed)
+        self.kind_filter = QComboBox()
+        self.kind_filter.setToolTip("Show only loops that detection found as this kind")
+        for text, _kinds in KIND_FILTERS:
+            self.kind_filter.addItem(text)
+        self.kind_filter.currentIndexChanged.connect(self._filter_changed)
         self.counts = QLabel()
-        self.counts.setToolTip("Loops by status")
+        self.counts.setToolTip("Loops by status (and, below, by the kind detection found them as)")
         # May be clipped in a narrow panel rather than widen the whole window.
         self.counts.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
-        self.counts.setAlignment(Qt.AlignRight | Qt.AlignVCenter)
+        self.counts.setWordWrap(True)
 
-        self.view = LoopTableView()
+        self.view = QTableView()
         self.view.setModel(self.proxy)
         self.view.setSortingEnabled(True)
-        self.view.sortByColumn(0, Qt.AscendingOrder)
+        self.view.sortByColumn(RANK_COLUMN, Qt.AscendingOrder)
         self.view.setSelectionBehavior(QAbstractItemView.SelectRows)
-        self.view.setSelectionMode(QAbstractItemView.SingleSelection)
+        self.view.setSelectionMode(QAbstractItemView.ExtendedSelection)
+        self.view.setTabKeyNavigation(False)  # Tab moves on to the next widget (issue 14, defect 6)
         self.view.setAlternatingRowColors(True)
         self.view.verticalHeader().setVisible(False)
         self.view.verticalHeader().setDefaultSectionSize(22)
         self.view.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
         self.view.horizontalHeader().setResizeContentsPrecision(100)  # look at 100 rows, not all
         self.view.horizontalHeader().setStretchLastSection(True)
-        self.view.setToolTip("Loop candidates. C/Y confirm, R/N reject, Backspace/U reset, J/K next/previous")
+        self.view.setToolTip("The review queue, best evidence first. Select one or many rows (Shift/Ctrl+click, "
+                             "Ctrl+A), then C confirm, R reject; F: next undecided. Help ▸ Keyboard shortcuts")
         self.view.selectionModel().currentRowChanged.connect(self._current_changed)
-        self.view.stepRequested.connect(self.step)
+        self.view.selectionModel().selectionChanged.connect(lambda *_: self.selectionChanged.emit())
 
         bar = QHBoxLayout()
         bar.setContentsMargins(0, 0, 0, 0)
         bar.addWidget(QLabel("Show:"))
-        bar.addWidget(self.filter)
-        bar.addWidget(self.counts, 1)
+        bar.addWidget(self.filter, 1)
+        bar.addWidget(self.kind_filter, 1)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(bar)
+        layout.addWidget(self.counts)
         layout.addWidget(self.view, 1)
 
         self._last_key: Optional[LoopKey] = None
@@ -250,10 +282,20 @@ class LoopTable(QWidget):
 
     # -- selection -------------------------------------------------------------------
     def selected_key(self) -> Optional[LoopKey]:
+        """The current row's loop, if it is selected."""
         index = self.view.selectionModel().currentIndex()
         if not index.isValid() or not self.view.selectionModel().isRowSelected(index.row(), QModelIndex()):
             return None
         return self.proxy.data(self.proxy.index(index.row(), 0), KEY_ROLE)
+
+    def selected_keys(self) -> list[LoopKey]:
+        """Every selected (and therefore shown) loop, in the order shown."""
+        rows = sorted(i.row() for i in self.view.selectionModel().selectedRows())
+        return [self.proxy.data(self.proxy.index(r, 0), KEY_ROLE) for r in rows]
+
+    def visible_keys(self) -> list[LoopKey]:
+        """The loops shown, in the order shown."""
+        return [self.proxy.data(self.proxy.index(r, 0), KEY_ROLE) for r in range(self.proxy.rowCount())]
 
     def select_key(self, key: Optional[LoopKey]) -> bool:
         """Select ``key``'s row (clearing the filter if it hides it); False if there is no such loop."""
@@ -267,29 +309,41 @@ class LoopTable(QWidget):
         proxy_index = self.proxy.mapFromSource(self.model.index(row, 0))
         if not proxy_index.isValid():
             self.filter.setCurrentIndex(0)
+            self.kind_filter.setCurrentIndex(0)
             proxy_index = self.proxy.mapFromSource(self.model.index(row, 0))
         self._select_proxy_row(proxy_index.row())
         return True
 
+    def select_keys(self, keys: list[LoopKey]) -> None:
+        """Select exactly these loops among those shown (hidden ones are not forced into view)."""
+        rows = []
+        for key in keys:
+            row = self.model.row_of(tuple(key))
+            if row is not None:
+                index = self.proxy.mapFromSource(self.model.index(row, 0))
+                if index.isValid():
+                    rows.append(index.row())
+        if not rows:
+            self.select_key(None)
+            return
+        if len(rows) == 1:
+            self._select_proxy_row(rows[0])
+            return
+        selection = QItemSelection()
+        for r in rows:
+            selection.select(self.proxy.index(r, 0), self.proxy.index(r, len(COLUMNS) - 1))
+        sm = self.view.selectionModel()
+        sm.setCurrentIndex(self.proxy.index(rows[0], 0), QItemSelectionModel.NoUpdate)
+        sm.select(selection, QItemSelectionModel.ClearAndSelect)
+
     def step(self, delta: int) -> None:
-        """Select the next (delta > 0) or previous visible row."""
+        """Select the next (delta > 0) or previous shown row; both ends wrap around (J and K alike)."""
         n = self.proxy.rowCount()
         if n == 0:
             return
         current = self.view.selectionModel().currentIndex()
         row = current.row() if current.isValid() else (-1 if delta > 0 else n)
-        self._select_proxy_row(min(max(row + delta, 0), n - 1))
-
-    def key_after(self, key: LoopKey) -> Optional[LoopKey]:
-        """The loop shown below ``key`` (or above it when it is the last), for auto-advance."""
-        row = self.model.row_of(key)
-        if row is None:
-            return None
-        prow = self.proxy.mapFromSource(self.model.index(row, 0)).row()
-        for r in (prow + 1, prow - 1):
-            if 0 <= r < self.proxy.rowCount():
-                return self.proxy.data(self.proxy.index(r, 0), KEY_ROLE)
-        return None
+        self._select_proxy_row((row + delta) % n)
 
     def _select_proxy_row(self, row: int) -> None:
         index = self.proxy.index(row, 0)
@@ -304,28 +358,36 @@ class LoopTable(QWidget):
 
     # -- refresh ---------------------------------------------------------------------
     def refresh(self) -> None:
-        key = self.selected_key() or self._last_key
+        keys = self.selected_keys()
+        current = self.selected_key() or self._last_key
         self.model.refresh()
-        if self.proxy.statuses is not None:
+        if self.proxy.statuses is not None or self.proxy.kinds is not None:
             self.proxy.refilter()  # statuses changed: rows may enter or leave the filter
         self._update_counts()
-        if key is not None and self.model.row_of(key) is not None:
-            row = self.proxy.mapFromSource(self.model.index(self.model.row_of(key), 0)).row()
-            if row >= 0:
-                self.view.selectionModel().blockSignals(True)
-                self._select_proxy_row(row)
-                self.view.selectionModel().blockSignals(False)
+        sm = self.view.selectionModel()
+        sm.blockSignals(True)
+        try:
+            if len(keys) > 1:
+                self.select_keys(keys)
+            elif current is not None and self.model.row_of(current) is not None:
+                row = self.proxy.mapFromSource(self.model.index(self.model.row_of(current), 0)).row()
+                if row >= 0:
+                    self._select_proxy_row(row)
+        finally:
+            sm.blockSignals(False)
 
     def _filter_changed(self) -> None:
-        key = self.selected_key()
-        self.proxy.set_statuses(FILTERS[max(self.filter.currentIndex(), 0)][1])
-        row = self.model.row_of(key) if key is not None else None
-        if row is not None and self.proxy.mapFromSource(self.model.index(row, 0)).isValid():
-            self.select_key(key)  # still shown: keep it selected (a hidden one is not forced back)
+        keys = self.selected_keys()
+        self.proxy.set_filter(FILTERS[max(self.filter.currentIndex(), 0)][1],
+                              KIND_FILTERS[max(self.kind_filter.currentIndex(), 0)][1])
+        if keys:
+            self.select_keys(keys)  # those still shown stay selected (hidden ones are not forced back)
 
     def _update_counts(self) -> None:
-        counts = {s: 0 for s in STATUS_COLORS}
-        for r in self.model.rows:
-            counts[r.status] = counts.get(r.status, 0) + 1
-        parts = [f"<span style='color:{STATUS_COLORS[s]}'>■</span>&nbsp;{counts[s]}&nbsp;{s}" for s in STATUS_COLORS]
-        self.counts.setText(" &nbsp; ".join(parts))
+        counts = ReviewQueue(self.doc).counts()
+        status, kind = counts["status"], counts["kind"]
+        parts = [f"<span style='color:{status_color(s)}'>■</span>&nbsp;{n}&nbsp;{s}"
+                 for s, n in status.items() if n or s in ("auto", "confirmed", "rejected")]
+        found = ", ".join(f"{n} {k}" for k, n in kind.items() if n)
+        self.counts.setText(" &nbsp; ".join(parts) + f" &nbsp;·&nbsp; <b>{counts['undecided']['undecided']} undecided</b>"
+                            + (f" &nbsp;·&nbsp; found as: {found}" if found else ""))

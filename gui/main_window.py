@@ -7,38 +7,48 @@ parameters and the evaluation.
 
 from __future__ import annotations
 
+import json
+import os
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
-from PySide6.QtCore import QSettings, Qt, QTimer, Signal
+from PySide6.QtCore import QEvent, QKeyCombination, QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QCloseEvent, QDragEnterEvent, QDropEvent, QIcon, QKeySequence, QUndoStack
 from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDialog, QLabel, QMainWindow,
                                QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget)
 
 from engine.errors import InputError
+from engine.journal import Journal, JournalLocked, journal_session_path
 from engine.params import MapParams
 from engine.session import Session, autosave_path_for, is_session_file, session_path_for
 
-from . import commands
+from .background import LatestOnly
+from .commands import ChangeParams, QtHistory
 from .document import Document, LoopKey
 from .eval_panel import EvalPanel
 from .frame_cache import FrameCache
 from .frame_viewer import FrameViewer
 from .graph_view import GraphView
+from .layout import path_layout
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
-from .pair_evidence import pair_yaw
-from .window_layout import split_views
+from .model import commands as edits
+from .model.document import needs_remap
+from .model.keys import bad_overrides, shortcut_table
+from .model.queue import ReviewQueue
 from .node_panel import NodePanel
+from .pair_evidence import pair_yaw
 from .pair_view import PairView
+from .window_layout import split_views
 from .params_panel import ParamsPanel
 from .similarity_view import SimilarityView
 from .worker import RunController, RunJob, RunResult
 
 APP_NAME = "panotopo"
+FOCUS_FRAME = "border: 2px solid #3daee9;"  # the frame viewer has the keyboard
 OPEN_FILTER = ("Recordings and sessions (*.mp4 *.avi *.mkv *.mov *.webm *.m4v *.bag *.db3 *.mcap "
                "*.panotopo.json *.json *.npz);;Videos (*.mp4 *.avi *.mkv *.mov *.webm *.m4v);;"
                "ROS bags (*.bag *.db3 *.mcap);;Sessions (*.json);;Descriptors (*.npz);;All files (*)")
@@ -60,9 +70,16 @@ class MainWindow(QMainWindow):
         self.doc = Document(self)
         self.frames = FrameCache()
         self.undo_stack = QUndoStack(self)
+        self.doc.history = QtHistory(self.undo_stack, self.doc)  # the model's commands, on Qt's stack
+        self.queue = ReviewQueue(self.doc)
+        self.doc.preparers["layout"] = path_layout  # the graph view's layout, made with each re-map
+        self.shortcuts = shortcut_table(self.defaults["shortcuts"])
         self.runner = RunController(self)
+        self.remapper = LatestOnly(self)           # build_map on a parameter change, off the UI thread
+        self.similarity_worker = LatestOnly(self)  # the similarity matrix, off the UI thread
         self.advance_after_decision = bool(self.defaults["ui"].get("advance_after_decision", True))
         self._pending_decisions: Optional[dict] = None
+        self._preparing_run: Optional[RunResult] = None  # a finished run whose map is being prepared
         self._pending_view: dict = {}
         self._extra_dirty = False     # changes outside the undo stack (poses loaded)
         self._defaults: dict = {}
@@ -75,10 +92,16 @@ class MainWindow(QMainWindow):
         self._connect()
         self._update_title()
         self._update_actions()
+        bad = bad_overrides(self.defaults["shortcuts"])
+        if bad:
+            self.statusBar().showMessage(f"Settings: shortcut entries ignored (unknown or fixed): {', '.join(bad)}",
+                                         10000)
 
         app = QApplication.instance()
         if app is not None:  # the thread must end before Qt does, whatever closes the app
             app.aboutToQuit.connect(self.runner.stop)
+            app.aboutToQuit.connect(self.remapper.stop)
+            app.aboutToQuit.connect(self.similarity_worker.stop)
         self.autosave_timer = QTimer(self)
         self.autosave_timer.setInterval(int(1000 * self.defaults["ui"].get("autosave_seconds", 30)))
         self.autosave_timer.timeout.connect(self.autosave)
@@ -139,11 +162,11 @@ class MainWindow(QMainWindow):
         self.splitDockWidget(self.params_dock, self.eval_dock, Qt.Vertical)
         self.resizeDocks([self.params_dock], [250], Qt.Horizontal)
 
-    def _action(self, text: str, slot, shortcut=None, tip: str = "") -> QAction:
+    def _action(self, text: str, slot, key: Optional[str] = None, tip: str = "") -> QAction:
+        """A menu action; ``key`` names its entry in the shortcut table (gui.model.keys)."""
         action = QAction(text, self)
-        if shortcut is not None:
-            keys = shortcut if isinstance(shortcut, (list, tuple)) else [shortcut]
-            action.setShortcuts([QKeySequence(k) for k in keys])
+        if key is not None:
+            self._set_keys(action, key)
         if tip:
             action.setStatusTip(tip)
             action.setToolTip(tip)
@@ -151,52 +174,62 @@ class MainWindow(QMainWindow):
         self.addAction(action)  # shortcuts work even with the menu bar hidden
         return action
 
+    def _set_keys(self, action: QAction, key: str) -> None:
+        keys = next(s.keys for s in self.shortcuts if s.action == key)
+        action.setShortcuts([QKeySequence(k) for k in keys])
+        self.action_of_key[key] = action
+
     def _build_actions(self) -> None:
         A = self._action
-        self.open_action = A("&Open…", self.open_dialog, QKeySequence.Open,
+        self.action_of_key: dict[str, QAction] = {}
+        self.open_action = A("&Open…", self.open_dialog, "open",
                              "Open a video, a ROS bag, a folder of images, a session or a descriptors .npz")
         self.open_folder_action = A("Open &folder or ROS2 bag…", self.open_folder_dialog, None,
                                     "Open a folder of panoramas or a ROS2 bag directory")
         self.poses_action = A("Load &poses…", self.load_poses_dialog, None,
                               "Load ground-truth poses (CSV t,x,y[,yaw] or a bag topic) for evaluation")
-        self.save_action = A("&Save session", self.save_session, QKeySequence.Save,
+        self.save_action = A("&Save session", self.save_session, "save",
                              "Save decisions and parameters next to the recording")
-        self.save_as_action = A("Save session &as…", self.save_session_as, QKeySequence.SaveAs)
-        self.export_action = A("&Export corrected graph (GraphML)…", self.export_graphml_dialog, "Ctrl+E",
+        self.save_as_action = A("Save session &as…", self.save_session_as, "save_as")
+        self.export_action = A("&Export corrected graph (GraphML)…", self.export_graphml_dialog, "export",
                                "Write the corrected map: rejected loops left out, confirmed and manual kept")
         self.export_png_action = A("Export graph &picture (PNG)…", self.export_png_dialog, None,
                                    "Save a picture of the graph view")
         self.export_plot_action = A("Export evaluation &plot (PNG)…", self.export_plot_dialog, None,
                                     "Map and similarity matrix with ground-truth colours")
-        self.quit_action = A("&Quit", self.close, QKeySequence.Quit)
+        self.quit_action = A("&Quit", self.close, "quit")
 
         self.undo_action = self.undo_stack.createUndoAction(self, "&Undo")
-        self.undo_action.setShortcuts([QKeySequence.Undo])
+        self._set_keys(self.undo_action, "undo")
         self.redo_action = self.undo_stack.createRedoAction(self, "&Redo")
-        self.redo_action.setShortcuts([QKeySequence("Ctrl+Shift+Z"), QKeySequence("Ctrl+Y")])
+        self._set_keys(self.redo_action, "redo")
         self.addAction(self.undo_action)
         self.addAction(self.redo_action)
-        self.label_action = A("Name this &place…", self.name_place_dialog, "L",
+        self.label_action = A("Name this &place…", self.name_place_dialog, "name_place",
                               "Give the current node a place name")
 
-        self.confirm_action = A("&Confirm loop", lambda: self.decide("confirmed"), ["C", "Y"],
-                                "Same place: keep the selected loop")
-        self.reject_action = A("&Reject loop", lambda: self.decide("rejected"), ["R", "N"],
-                               "Different places: drop the selected loop")
-        self.reset_action = A("Rese&t loop", lambda: self.decide("auto"), ["Backspace", "U"],
+        self.confirm_action = A("&Confirm selected loops", lambda: self.decide("confirmed"), "confirm",
+                                "Same place: keep the selected loops")
+        self.reject_action = A("&Reject selected loops", lambda: self.decide("rejected"), "reject",
+                               "Different places: drop the selected loops")
+        self.reset_action = A("Rese&t selected loops", lambda: self.decide("auto"), "reset",
                               "Back to undecided")
-        self.next_action = A("&Next loop", lambda: self.loop_table.step(1), ["J", "PgDown"])
-        self.prev_action = A("&Previous loop", lambda: self.loop_table.step(-1), ["K", "PgUp"])
-        self.manual_action = A("&Add manual loop…", self.manual_loop_dialog, "M",
+        self.next_undecided_action = A("Next &undecided loop", self.next_undecided, "next_undecided",
+                                       "Select the next loop nobody has decided on yet")
+        self.next_action = A("&Next loop", lambda: self.loop_table.step(1), "next")
+        self.prev_action = A("&Previous loop", lambda: self.loop_table.step(-1), "previous")
+        self.reject_below_action = A("Reject all &below this one", self.reject_below, "reject_below",
+                                     "Reject every undecided loop whose evidence is below the selected loop's")
+        self.manual_action = A("&Add manual loop…", self.manual_loop_dialog, "manual_loop",
                                "Join two nodes that are the same place")
-        self.remove_action = A("Re&move manual loop", self.remove_selected_manual, "Delete")
+        self.remove_action = A("Re&move manual loop", self.remove_selected_manual, "remove_manual")
         self.advance_action = QAction("Advance after a decision", self, checkable=True,
                                       checked=self.advance_after_decision)
         self.advance_action.toggled.connect(lambda on: setattr(self, "advance_after_decision", on))
 
-        self.run_action = A("&Run", self.start_run, "F5", "Describe the recording and build the map")
-        self.cancel_action = A("&Cancel run", self.cancel_run, "Esc", "Stop the run; the current map is kept")
-        self.shortcuts_action = A("&Keyboard shortcuts", self.show_shortcuts, "F1")
+        self.run_action = A("&Run", self.start_run, "run", "Describe the recording and build the map")
+        self.cancel_action = A("&Cancel run", self.cancel_run, "cancel_run", "Stop the run; the current map is kept")
+        self.shortcuts_action = A("&Keyboard shortcuts", self.show_shortcuts, "shortcuts")
         self.about_action = A("&About panotopo", self.show_about)
 
     def _build_menus(self) -> None:
@@ -224,8 +257,10 @@ class MainWindow(QMainWindow):
         for a in (self.confirm_action, self.reject_action, self.reset_action):
             m.addAction(a)
         m.addSeparator()
-        for a in (self.next_action, self.prev_action):
+        for a in (self.next_undecided_action, self.next_action, self.prev_action):
             m.addAction(a)
+        m.addSeparator()
+        m.addAction(self.reject_below_action)
         m.addSeparator()
         for a in (self.manual_action, self.remove_action):
             m.addAction(a)
@@ -264,6 +299,7 @@ class MainWindow(QMainWindow):
         # Bound methods, not lambdas: Qt drops these connections when the window dies.
         self.undo_stack.cleanChanged.connect(self._update_title)
         self.undo_stack.indexChanged.connect(self._update_actions)
+        self.undo_stack.indexChanged.connect(self._undo_moved)
         self.runner.progress.connect(self._on_progress)
         self.runner.finished.connect(self._on_run_finished)
         self.runner.failed.connect(self._on_run_failed)
@@ -278,8 +314,7 @@ class MainWindow(QMainWindow):
         self.node_panel.loopActivated.connect(self.select_loop)
         self.node_panel.addLoopRequested.connect(lambda k: self.manual_loop_dialog(k))
         self.loop_table.loopSelected.connect(self._loop_selected)
-        self.loop_table.view.decide.connect(self.decide)
-        self.pair_view.decide.connect(self.decide)
+        self.pair_view.decide.connect(self.decide_pair)
         self.pair_view.addManual.connect(self.add_manual_loop)
         self.pair_view.removeManual.connect(self.remove_manual_loop)
         self.params_panel.paramsEdited.connect(self._params_edited)
@@ -292,6 +327,15 @@ class MainWindow(QMainWindow):
         self.doc.loopsChanged.connect(self._update_summary)
         self.doc.mapReplaced.connect(self._update_actions)
         self.doc.loopsChanged.connect(self._update_actions)
+        self.doc.mapReplaced.connect(self._request_similarity)
+        self.doc.journalFailed.connect(self.warn)
+        self.tabs.currentChanged.connect(self._request_similarity)
+        # Ctrl+Z in the place-name field: the app's undo once the name is applied (defect 7).
+        self.node_panel.name.installEventFilter(self)
+        app = QApplication.instance()
+        self._watching_focus = app is not None
+        if app is not None:
+            app.focusChanged.connect(self._focus_changed)
 
     def _apply_default_settings(self) -> None:
         """Start from resources/default_settings.json (map parameters, descriptor, interval, distance)."""
@@ -368,8 +412,14 @@ class MainWindow(QMainWindow):
                                             interval=self.params_panel.interval_value(), topic=topic,
                                             shift=params.uses_shift, options=dict(self.describe_options))
 
+        if not self._attach_journal(p):
+            return False
+
         # A new document: nothing of the previous one survives.
         self.runner.stop()
+        self.remapper.stop()
+        self.similarity_worker.stop()
+        self._preparing_run = None
         self.undo_stack.clear()
         self._extra_dirty = False
         self.doc.clear_map()
@@ -381,17 +431,71 @@ class MainWindow(QMainWindow):
         self._pending_view = dict(session.view) if session else {}
         self.doc.set_source(p, source)
         self.doc.mapReplaced.emit()  # views clear
+        self.select_pair_key(None)   # nothing of the previous recording stays selected (defect 5)
         self.params_panel.set_describe(settings.descriptor, settings.interval)
         self.params_panel.set_params(self.doc.params, self._defaults)
 
         self._load_initial_poses(p, session, pose_topic)
         if session is None and not descriptors_file:
             self._offer_saved_work(p)
+        self._recover_journal()
         self._update_title()
         self.statusBar().showMessage(f"Opened {p.name}", 5000)
         if run:
             self.start_run()
         return True
+
+    # ==== the decision journal (engine.journal): every decision on disk as it is made ===========
+    def _attach_journal(self, p: Path) -> bool:
+        """Open the journal of recording ``p`` for this window; False when another panotopo has it.
+
+        The document appends every decision record to it (``MapDocument.record_decision``).
+        """
+        if not self.interactive:  # a screenshot or scripted run neither takes nor writes the user's journal
+            return True
+        old = self.doc.journal
+        if old is not None and old.session_path == journal_session_path(p):
+            old.close()  # reopening the same recording: release our own lock first
+            self.doc.journal = old = None
+        try:
+            journal = Journal.open(p)
+        except JournalLocked as exc:
+            self.error(f"{p.name} is open in another panotopo window ({exc.holder}): close it there first")
+            return False
+        except OSError as exc:
+            journal = None
+            self.warn(f"Decisions on {p.name} cannot be journaled ({exc.strerror or exc}); "
+                      "save often (autosave still runs)")
+        if old is not None:
+            old.close()
+        self.doc.journal = journal
+        if journal is not None and journal.fallback:
+            self.statusBar().showMessage(f"The recording's folder is read-only: decisions are journaled "
+                                         f"in {journal.path.parent}", 10000)
+        return True
+
+    def _recover_journal(self) -> None:
+        """Decisions made after the last save (the app was killed): replayed over the saved ones."""
+        journal = self.doc.journal
+        records = journal.replay() if journal is not None else []
+        if not records:
+            return
+        from .model import journal as journal_records
+
+        self._pending_decisions = journal_records.replay(records, self._pending_decisions or {})
+        self._extra_dirty = True
+        self.statusBar().showMessage(f"{len(records)} decisions made after the last save were recovered "
+                                     "(not saved yet)", 10000)
+
+    def _compact_journal(self, upto: Optional[int] = None) -> None:
+        """The session on disk now holds the journal's records (or the user discarded them)."""
+        journal = self.doc.journal
+        if journal is None:
+            return
+        try:
+            journal.compact(upto)
+        except OSError as exc:
+            self.statusBar().showMessage(f"Journal not compacted: {exc}", 8000)
 
     def _open_session(self, path: Path, run: bool = True) -> bool:
         session = Session.load(path)
@@ -551,6 +655,7 @@ class MainWindow(QMainWindow):
 
         if self.runner.running:
             self.runner.stop()
+        self._preparing_run = None  # a new run supersedes the map being prepared
         self._show_progress(True)
         self._progress_stage = ""
         self._stage_started = time.monotonic()
@@ -584,34 +689,48 @@ class MainWindow(QMainWindow):
             self.progress_bar.setFormat(stage)
 
     def _on_run_finished(self, result: RunResult) -> None:
+        """The run's map is prepared off the UI thread too (decisions applied, rows, layout)."""
+        # Decisions survive a re-run: the current ones, or those of the session just opened.
+        pending, self._pending_decisions = self._pending_decisions, None
+        self._preparing_run = result
+        self.progress_bar.setRange(0, 0)
+        self.progress_bar.setFormat("preparing the map")
+        job = self.doc.remap_job(lambda: result.topomap, pending)
+        self.remapper.submit(job, lambda prepared: self._run_prepared(result, pending, prepared),
+                             lambda exc: self._run_prepare_failed(result, exc))
+
+    def _run_prepare_failed(self, result: RunResult, exc: BaseException) -> None:
+        if self._preparing_run is result:
+            self._preparing_run = None
+            self._on_run_failed(f"unexpected error: {exc.__class__.__name__}: {exc}")
+
+    def _run_prepared(self, result: RunResult, pending, prepared) -> None:
         from engine.pipeline import descriptor_defaults
 
+        if self._preparing_run is not result:
+            return  # another run or another recording came in meanwhile
+        if pending is None and not self.doc.is_current(prepared):  # decided on the old map meanwhile
+            self._on_run_finished(result)  # prepare again, with those decisions
+            return
+        self._preparing_run = None
         self._show_progress(False)
-        # Decisions survive a re-run: the current ones, or those of the session just opened.
-        decisions = self._pending_decisions if self._pending_decisions is not None else self.doc.decisions()
-        self._pending_decisions = None
         self.doc.describe_settings = result.job.settings
         self._defaults = descriptor_defaults(result.descs)
         self._set_known_shifts(result.descs)
-        topomap = result.topomap
-        if result.job.params != self.doc.params and self.doc.params.uses_shift == result.job.params.uses_shift:
-            # The user changed a map parameter while the run was going: honour it now.
-            from engine.pipeline import build_map
-
-            try:
-                topomap = build_map(result.descs, self.doc.params, source=str(result.job.path))
-            except InputError as exc:
-                self.warn(str(exc))
-        self.doc.replace_map(topomap, result.descs, decisions)
+        self.doc.install(prepared, result.descs)
+        if needs_remap(result.job.params, self.doc.params):
+            # The user changed a map parameter while the run was going: honour it (off the UI thread).
+            self._remap(self.doc.params)
         self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
         self.params_panel.set_params(self.doc.params, self._used_defaults())
         self._restore_view()
         self.statusBar().showMessage(
             f"Map built in {result.seconds:.1f} s: {self.doc.node_count()} nodes, "
-            f"{len(self.doc.topomap.loops())} loop candidates", 10000)
+            f"{len(self.doc.loop_rows())} loop candidates", 10000)
         self._update_actions()
         if self.is_modified():
             self.autosave()
+        _settle_garbage_collector()
         self.mapReady.emit()
 
     def _on_run_failed(self, message: str) -> None:
@@ -651,7 +770,7 @@ class MainWindow(QMainWindow):
         old = self.doc.params
         if new == old:
             return
-        self.undo_stack.push(commands.ChangeParams(self._apply_params, old, new, field))
+        self.undo_stack.push(ChangeParams(self._apply_params, old, new, field))
 
     def calibrate_thresholds(self) -> None:
         """Node and loop thresholds of the paper's methods from this recording (one undo step)."""
@@ -663,17 +782,15 @@ class MainWindow(QMainWindow):
         old = self.doc.params
         new = replace(old, **paper_thresholds(self.doc.descs.vectors, old.neighbor_node_num))
         if new != old:
-            self.undo_stack.push(commands.ChangeParams(self._apply_params, old, new, "thresholds"))
+            self.undo_stack.push(ChangeParams(self._apply_params, old, new, "thresholds"))
 
     def _apply_params(self, _old: MapParams, new: MapParams) -> None:
         """Rebuild the map with ``new`` (undo/redo and the panel both land here)."""
-        from engine.pipeline import build_map
-
         self.doc.params = new
         self.params_panel.set_params(new, self._defaults)
         descs = self.doc.descs
-        if descs is None:
-            return
+        if descs is None or self._preparing_run is not None:
+            return  # the run's map is on its way; it is rebuilt with ``new`` when it lands
         if new.uses_shift != bool(descs.meta.get("shift", True)):
             if str(self.doc.input_path).endswith(".npz"):
                 self.warn(f"Method '{new.method}' needs {'shifted' if new.uses_shift else 'unshifted'} "
@@ -681,16 +798,38 @@ class MainWindow(QMainWindow):
                 return
             self.start_run()  # describe again (cached when done before)
             return
-        decisions = self.doc.decisions()
-        try:
-            topomap = build_map(descs, new, source=str(self.doc.input_path))
-        except InputError as exc:
-            self.warn(str(exc))
+        self._remap(new)
+
+    def _remap(self, params: MapParams) -> None:
+        """Build and prepare the map with ``params`` off the UI thread; the newest request wins."""
+        from engine.pipeline import build_map
+
+        descs, source = self.doc.descs, str(self.doc.input_path)
+        self.statusBar().showMessage("Rebuilding the map…")
+        job = self.doc.remap_job(lambda: build_map(descs, params, source=source))
+        self.remapper.submit(job, lambda prepared: self._remapped(descs, params, prepared),
+                             lambda exc: self._remap_failed(descs, params, exc))
+
+    def _remap_failed(self, descs, params: MapParams, exc: BaseException) -> None:
+        if self.doc.descs is not descs or self.doc.params != params:
             return
-        self.doc.replace_map(topomap, decisions=decisions)
-        self.params_panel.set_params(new, self._used_defaults())
+        if isinstance(exc, InputError):
+            self.warn(str(exc))
+        elif isinstance(exc, RuntimeError) and "changed size during iteration" in str(exc):
+            self._remap(params)  # a manual loop was added while the worker read the decisions
+        else:
+            self.error(f"unexpected error: {exc.__class__.__name__}: {exc}")
+
+    def _remapped(self, descs, params: MapParams, prepared) -> None:
+        if self.doc.descs is not descs or self.doc.params != params:
+            return  # a new run or another parameter change came in meanwhile
+        if not self.doc.is_current(prepared):
+            self._remap(params)  # decided (or loaded poses) while it built: build with those
+            return
+        self.doc.install(prepared)
+        self.params_panel.set_params(params, self._used_defaults())
         self.statusBar().showMessage(
-            f"{self.doc.node_count()} nodes, {len(self.doc.topomap.loops())} loops with the new parameters", 5000)
+            f"{self.doc.node_count()} nodes, {len(self.doc.loop_rows())} loops with the new parameters", 5000)
         self.mapReady.emit()
 
     # ==== curation =========================================================================
@@ -698,26 +837,61 @@ class MainWindow(QMainWindow):
         return self.loop_table.selected_key() or self.pair_view.key
 
     def decide(self, status: str) -> None:
-        key = self.selected_key()
-        attrs = self.doc.loop_attrs(key) if key is not None else None
-        if attrs is None:
-            self.statusBar().showMessage("Select a loop candidate first", 4000)
+        """Confirm, reject or reset the loops selected in the table (one undo step), nothing else.
+
+        A decision applies only to rows the user sees selected; after it the selection moves
+        to the row below, and stays on the last row (no wrap: issue 14, defect 1).
+        """
+        keys = self.loop_table.selected_keys()
+        if not keys:
+            self.statusBar().showMessage("Select a loop in the table first", 4000)
             return
-        if attrs.get("status") == "manual":
+        self._decide_keys(keys, status, order=self.loop_table.visible_keys())
+
+    def decide_pair(self, status: str) -> None:
+        """A decision button of the pair view: the loop shown there."""
+        if self.pair_view.key is not None:
+            self._decide_keys([self.pair_view.key], status, order=self.loop_table.visible_keys())
+
+    def _decide_keys(self, keys: list, status: str, order: list) -> None:
+        manual = [k for k in keys if self.doc.status_of(k) == "manual"]
+        if len(manual) == len(keys):
             self.statusBar().showMessage("A manual loop has no decision to change: remove it instead (Delete)", 5000)
             return
-        following = self.loop_table.key_after(key) if self.advance_after_decision and status != "auto" else None
-        if attrs.get("status") != status:
-            self.undo_stack.push(commands.SetLoopStatus(self.doc, key, attrs.get("status", "auto"), status))
-        if following is not None:
-            self.loop_table.select_key(following)
-        else:
-            self.loop_table.select_key(key)
+        self.queue.select(keys)
+        self.queue.advance_after_decision = self.advance_after_decision
+        changed = self.queue.decide(status, order=order)
+        self.loop_table.select_keys(self.queue.selected)
+        if len(keys) > 1:
+            self.statusBar().showMessage(f"{edits.verb(status)}: {changed} of {len(keys)} selected loops "
+                                         "changed (one undo step)", 5000)
+
+    def next_undecided(self) -> None:
+        """Select the next loop nobody has decided on (in the order shown; wraps to the top)."""
+        current = self.loop_table.selected_key()
+        key = self.queue.next_undecided(after=current, order=self.loop_table.visible_keys())
+        if key is None:  # none shown: the filter may hide them
+            key = self.queue.next_undecided(after=current)
+        if key is None:
+            self.statusBar().showMessage("Every loop is decided", 5000)
+            return
+        self.loop_table.select_key(key)
+
+    def reject_below(self) -> None:
+        """Reject every undecided loop ranked below the selected one (one undo step)."""
+        key = self.loop_table.selected_key()
+        if key is None:
+            self.statusBar().showMessage("Select the weakest loop you judged good first", 5000)
+            return
+        n = self.queue.reject_below(self.queue.evidence_of(key))
+        self.loop_table.select_key(key)
+        self.statusBar().showMessage(f"Rejected {n} undecided loops ranked below the selected one "
+                                     "(Ctrl+Z undoes them all)", 8000)
 
     def add_manual_loop(self, key: LoopKey) -> bool:
         try:
-            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache.peek)  # gui-b: issue 14, 8
-            self.undo_stack.push(commands.AddManualLoop(self.doc, tuple(key), yaw))
+            yaw = pair_yaw(self.doc, self.frames, tuple(key), self.pair_view.match_cache.peek)  # issue 14, 8
+            self.doc.push(edits.AddManualLoop(tuple(key), yaw))
         except InputError as exc:
             self.warn(str(exc))
             return False
@@ -725,19 +899,22 @@ class MainWindow(QMainWindow):
         return True
 
     def _ctrl_click_loop(self, a: int, b: int) -> None:
-        """Ctrl+click in the graph: a manual loop from the current node (undoable, no dialog)."""
+        """Ctrl+click in the graph: a manual loop from the current node, after a question (defect 10)."""
         if abs(a - b) < 2:
             self.statusBar().showMessage("Neighbouring nodes are already joined by the path", 5000)
             return
+        lo, hi = min(a, b), max(a, b)
+        if not self._ask_yes_no("Add manual loop", f"Join n{lo} and n{hi} as the same place (a manual loop)?"):
+            return
         if self.add_manual_loop(self._key_of_nodes(a, b)):
-            self.statusBar().showMessage(f"Manual loop n{min(a, b)} ↔ n{max(a, b)} added (Ctrl+Z to undo)", 5000)
+            self.statusBar().showMessage(f"Manual loop n{lo} ↔ n{hi} added (Ctrl+Z to undo)", 5000)
 
     def remove_manual_loop(self, key: LoopKey) -> None:
         attrs = self.doc.loop_attrs(key)
         if attrs is None or attrs.get("status") != "manual":
             self.statusBar().showMessage("Only manual loops can be removed; reject a detected loop instead", 5000)
             return
-        self.undo_stack.push(commands.RemoveLoop(self.doc, key))
+        self.doc.push(edits.RemoveLoop(self.doc, key))
 
     def remove_selected_manual(self) -> None:
         key = self.selected_key()
@@ -767,12 +944,10 @@ class MainWindow(QMainWindow):
     def set_label(self, frame: int, label: str) -> None:
         old = self.doc.label_of_frame(frame)
         if label != old:
-            self.undo_stack.push(commands.SetLabel(self.doc, frame, old, label))
+            self.doc.push(edits.SetLabel(frame, old, label))
 
     def _key_of_nodes(self, a: int, b: int) -> LoopKey:
-        fa = int(self.doc.node_data(self.doc.node_id(a))["frame"])
-        fb = int(self.doc.node_data(self.doc.node_id(b))["frame"])
-        return (min(fa, fb), max(fa, fb))
+        return self.doc.key_of_nodes(a, b)
 
     # ==== selection sync ===================================================================
     def select_loop(self, key: LoopKey) -> None:
@@ -841,6 +1016,7 @@ class MainWindow(QMainWindow):
         if self.doc.input_path is None:
             return False
         target = Path(path) if path else (self.doc.session_path or session_path_for(self.doc.input_path))
+        journaled = self.doc.journal.last_seq if self.doc.journal is not None else None
         try:
             self.current_session().save(target)
         except OSError as exc:
@@ -849,6 +1025,8 @@ class MainWindow(QMainWindow):
         self.doc.session_path = target
         self.undo_stack.setClean()
         self._extra_dirty = False
+        if target == session_path_for(self.doc.input_path):  # the session the journal replays over
+            self._compact_journal(journaled)
         autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
         self._update_title()
         self._add_recent(str(target))
@@ -896,6 +1074,7 @@ class MainWindow(QMainWindow):
             return self.save_session()
         if answer == QMessageBox.Discard:
             autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
+            self._compact_journal()  # discarded: they must not come back on the next open
             self.undo_stack.setClean()
             self._extra_dirty = False
             return True
@@ -981,7 +1160,7 @@ class MainWindow(QMainWindow):
             self.summary_label.setText("")
             return
         rows = self.doc.loop_rows()
-        undecided = sum(r.status == "auto" for r in rows)
+        undecided = self.queue.counts()["undecided"]["undecided"]
         self.summary_label.setText(f"{self.doc.node_count()} nodes · {len(rows)} loops · {undecided} undecided")
         self._update_title()
 
@@ -1027,7 +1206,49 @@ class MainWindow(QMainWindow):
     def show_shortcuts(self) -> None:
         from .shortcuts_dialog import ShortcutsDialog
 
-        ShortcutsDialog(self).exec()
+        ShortcutsDialog(self.shortcuts, self).exec()
+
+    # ==== background similarity, focus, the place-name field's undo ============================
+    def _request_similarity(self, *_args) -> None:
+        """Compute the similarity matrix off the UI thread, when its tab is shown (20k nodes: seconds)."""
+        if self.tabs.currentWidget() is not self.similarity_view or self.doc.similarity_ready():
+            return
+        job = self.doc.similarity_job()
+        if job is None:
+            return
+        topomap = self.doc.topomap
+        self.similarity_worker.submit(job, lambda sim: self.doc.set_similarity(topomap, sim),
+                                      lambda exc: self.error(f"Similarity matrix failed: {exc}"))
+
+    def _focus_changed(self, _old, new) -> None:
+        """A visible frame around the frame viewer while it has the keys (defect 6)."""
+        inside = new is not None and (new is self.frame_viewer or self.frame_viewer.isAncestorOf(new))
+        self.frame_viewer.canvas.setStyleSheet(FOCUS_FRAME if inside else "")
+        self.frame_viewer.setProperty("keyFocus", inside)
+
+    def eventFilter(self, watched, event) -> bool:
+        """Undo/redo keys in the place-name field go to the app once the name is applied (defect 7):
+        the field keeps them only while it holds an edit not applied yet."""
+        if watched is self.node_panel.name and event.type() == QEvent.ShortcutOverride:
+            undo_keys = (QKeySequence.Undo, QKeySequence.Redo)
+            if any(event.matches(k) for k in undo_keys) or event.keyCombination() == QKeyCombination(
+                    Qt.ControlModifier, Qt.Key_Y):
+                k = self.node_panel.node_index
+                applied = (self.doc.label_of_frame(int(self.doc.node_frames()[k]))
+                           if self.doc.has_map and k is not None else "")
+                if self.node_panel.name.text().strip() == applied:
+                    event.ignore()
+                    self._name_follows_undo = True
+                    return True  # not the field's: the window's Undo/Redo action runs
+        return super().eventFilter(watched, event)
+
+    def _undo_moved(self, *_args) -> None:
+        """After an undo/redo typed in the place-name field, the field shows the name now applied."""
+        if getattr(self, "_name_follows_undo", False):
+            self._name_follows_undo = False
+            k = self.node_panel.node_index
+            if self.doc.has_map and k is not None:
+                self.node_panel.name.setText(self.doc.label_of_frame(int(self.doc.node_frames()[k])))
 
     def show_about(self) -> None:
         from engine import __version__
@@ -1066,24 +1287,71 @@ class MainWindow(QMainWindow):
         event.accept()
 
     def shutdown(self) -> None:
-        """Stop the worker thread and timers and release the recording."""
+        """Stop the worker threads and timers and release the recording."""
         self.autosave_timer.stop()
         self.frame_viewer.shutdown()
         self.pair_view.shutdown()
         self.runner.stop()
+        self.remapper.stop()
+        self.similarity_worker.stop()
+        if self.doc.journal is not None:
+            self.doc.journal.close()  # the records stay until a save compacts them
+            self.doc.journal = None
+        app = QApplication.instance()
+        if app is not None and self._watching_focus:
+            self._watching_focus = False
+            app.focusChanged.disconnect(self._focus_changed)
         self.doc.close()
 
 
 def _default_settings() -> dict:
     """resources/default_settings.json, or built-in values if it is missing or broken."""
-    fallback = {"map": {}, "describe": {}, "eval": {}, "ui": {}}
+    fallback = {"map": {}, "describe": {}, "eval": {}, "ui": {}, "shortcuts": {}}
     try:
         import resources
 
         data = resources.default_settings()
     except Exception:  # the window must open even with a damaged install
-        return fallback
-    return {k: dict(data.get(k) or {}) for k in fallback}
+        data = {}
+    out = {k: dict(data.get(k) or {}) for k in fallback}
+    user = _user_settings()
+    for section in fallback:
+        if isinstance(user.get(section), dict):
+            out[section].update(user[section])
+    return out
+
+
+def user_settings_path() -> Path:
+    """The user's settings file: same sections as resources/default_settings.json, each optional."""
+    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
+    return Path(base) / APP_NAME / "settings.json"
+
+
+def _user_settings() -> dict:
+    path = user_settings_path()
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return {}
+    except (OSError, ValueError) as exc:  # a broken file must not stop the app
+        print(f"panotopo: {path}: ignored ({exc.__class__.__name__})", file=sys.stderr)
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def _settle_garbage_collector() -> None:
+    """Collect once, then move everything alive to the collector's permanent generation.
+
+    After a run the process holds millions of long-lived objects (torch, Qt, the engine's
+    modules, the descriptors' metadata). Each full collection walked all of them: 200 ms
+    with the GIL held, a stall of the window, every few re-maps of a 20k-node map
+    (benchmarks/bench_ui_stall.py). Frozen, they are skipped; what is made later (the next
+    maps) is collected as usual. One full collection per run is the price.
+    """
+    import gc
+
+    gc.collect()
+    gc.freeze()
 
 
 def _app_icon() -> QIcon:

@@ -153,7 +153,7 @@ class PairView(QWidget):
     def refresh(self) -> None:
         key = self.key
         if key is None or not self.doc.has_map or self.doc.nodes_of(key) is None:
-            self._clear()
+            self._clear()   # no caption of a pair no longer shown (defect 5)
             return
         u, v = self.doc.nodes_of(key)
         du, dv = self.doc.node_data(u), self.doc.node_data(v)

@@ -57,20 +57,21 @@ class SimilarityView(QWidget):
         layout.addWidget(self.glw)
 
         doc.mapReplaced.connect(self.rebuild)
+        doc.similarityReady.connect(self.rebuild)  # computed off the UI thread (gui.background)
         doc.loopsChanged.connect(self.redraw_loops)
 
     def rebuild(self) -> None:
-        sim = self.doc.similarity()
+        sim = self.doc.similarity() if self.doc.similarity_ready() else None
         if sim is None:
             self.image.clear()
             self.selected.setData([], [])
             for item in self.markers.values():
                 item.setData([], [])
             return
-        lo = float(np.percentile(sim, 2)) if sim.size else 0.0
-        self.image.setImage(sim, autoLevels=False)
-        self.colorbar.setLevels((max(min(lo, 0.99), -1.0), 1.0))
+        preview, lo = self.doc.similarity_preview()  # block maxima and floor, made off the UI thread
         n = sim.shape[0]
+        self.image.setImage(preview, autoLevels=False, rect=(0, 0, n, n))
+        self.colorbar.setLevels((max(min(lo, 0.99), -1.0), 1.0))
         self.plot.setRange(xRange=(0, n), yRange=(0, n), padding=0.02)
         self.plot.setTitle(f"Similarity between the {n} nodes", color="#444", size="9pt")
         self.redraw_loops()
@@ -93,7 +94,7 @@ class SimilarityView(QWidget):
         self.selected.setData([b + 0.5, a + 0.5], [a + 0.5, b + 0.5])
 
     def _clicked(self, event) -> None:
-        sim = self.doc.similarity()
+        sim = self.doc.similarity() if self.doc.similarity_ready() else None
         if event.button() != Qt.LeftButton or sim is None:
             return
         vb = self.plot.getViewBox()

@@ -161,6 +161,30 @@ def test_demo_writes_recording_map_and_plot(tmp_path, capsys):
     assert "precision" in text and "demo.graphml" in text
     g = nx.read_graphml(out / "demo.graphml")
     assert all("x" in a for _, a in g.nodes(data=True))
+    _demo_output_is_small_and_named(out, text, width=256)
+
+
+def _demo_output_is_small_and_named(out, text: str, width: int) -> None:
+    """Issue 14, defect 13: the demo wrote 630 MB of raw-image bags into an unnamed folder."""
+    from engine.sources import list_image_topics, open_recording
+
+    assert str(out.resolve()) in text                 # the folder is named in full
+    counts = []
+    for bag in (out / "demo.bag", out / "demo_ros2_sqlite3", out / "demo_ros2_mcap"):
+        topics = list_image_topics(bag)
+        assert topics and all(msgtype.endswith("CompressedImage") for _, msgtype, _ in topics)
+        counts.append(topics[0][2])
+        source = open_recording(bag)
+        assert source.frame_at(0).rgb.shape[:2] == (width // 2, width)
+        source.close()
+    raw_bag = counts[0] * width * (width // 2) * 3
+    written = sum(p.stat().st_size for p in out.rglob("*") if p.is_file())
+    assert written < raw_bag                          # everything weighs less than one raw-image bag
+
+
+def test_the_default_demo_folder_is_git_ignored():
+    ignored = (Path(__file__).resolve().parent.parent / ".gitignore").read_text().split()
+    assert "/panotopo-demo/" in ignored
 
 
 @pytest.mark.parametrize("argv, reason", [
@@ -202,3 +226,19 @@ def test_a_broken_video_gives_only_our_line_on_stderr(tmp_path):
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("panotopo: error:") and "broken.mp4" in lines[0]
+
+
+def test_undefined_metrics_print_na_not_zero():
+    """Issue 14, defect 14: no detections and no positives printed precision/recall 0.000."""
+    from engine.cli import _evaluation_dict, _evaluation_lines
+    from engine.evaluate import evaluate
+    from engine.graph import TopoMap
+
+    g = nx.Graph()
+    for k in range(12):  # a straight walk, no loop arcs: nothing detected, no place seen twice
+        g.add_node(f"n{k}", index=k, frame=k, stamp=float(k), shift=0, label="", x=float(k), y=0.0)
+    ev = evaluate(TopoMap(g, {"neighbor_node_num": 2}))
+    text = _evaluation_lines(ev)
+    assert "precision n/a" in text and "recall n/a" in text and "F1 n/a" in text
+    assert "accuracy 1.000" in text
+    assert set(_evaluation_dict(ev)["undefined"]) == {"precision", "recall", "f1"}

@@ -109,6 +109,9 @@ def no_sidecars_left(recording):
     for p in (recording["video"], recording["ros1"]):
         session_path_for(p).unlink(missing_ok=True)
         autosave_path_for(p).unlink(missing_ok=True)
+        for suffix in (".journal", ".journal.lock"):  # the decision journal (engine.journal) too
+            session = session_path_for(p)
+            session.with_name(session.name + suffix).unlink(missing_ok=True)
 
 
 def test_whole_session_open_run_curate_undo_save_reopen_export(qtbot, make_window, recording, tmp_path, dialogs):
@@ -334,6 +337,7 @@ def test_graph_and_matrix_clicks_select(qtbot, make_window, recording, tmp_path)
 
     # A matrix cell with a loop selects it in the table; one without shows the pair.
     w.tabs.setCurrentWidget(w.similarity_view)
+    qtbot.waitUntil(w.doc.similarity_ready, timeout=10_000)  # computed off the UI thread
     qtbot.wait(50)
     row = w.doc.loop_rows()[0]
     w.similarity_view._clicked(_FakeClick(w.similarity_view.cell_scene_pos(row.index_u, row.index_v)))
@@ -486,7 +490,7 @@ def test_recent_files_and_frame_keys(qtbot, make_window, recording, tmp_path):
     assert frame is not None and 0 <= frame.shift < frame.rgb.shape[1]
 
 
-def test_graph_loop_click_and_ctrl_click_manual_loop(qtbot, make_window, recording):
+def test_graph_loop_click_and_ctrl_click_manual_loop(qtbot, make_window, recording, dialogs):
     w = make_window()
     open_and_run(qtbot, w, recording["video"])
     qtbot.wait(50)
@@ -514,8 +518,13 @@ def test_graph_loop_click_and_ctrl_click_manual_loop(qtbot, make_window, recordi
     first, second = 1, n - 2
     qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, pos=gv.node_screen_pos(first))
     assert gv.current_node == first
-    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, Qt.ControlModifier, pos=gv.node_screen_pos(second))
     key = w._key_of_nodes(first, second)
+    dialogs.answers.append(QMessageBox.No)   # Ctrl+click asks first (issue 14, defect 10): No adds nothing
+    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, Qt.ControlModifier, pos=gv.node_screen_pos(second))
+    assert key not in statuses(w)
+    assert [k for k, _ in dialogs] == ["question"]
+    dialogs.answers.append(QMessageBox.Yes)
+    qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, Qt.ControlModifier, pos=gv.node_screen_pos(second))
     assert statuses(w)[key] == "manual"
     w.undo_stack.undo()
     assert key not in statuses(w)
@@ -550,16 +559,16 @@ def test_table_sorting_and_status_filter(qtbot, make_window, recording):
     table = w.loop_table
     table.step(1)
     selected = table.selected_key()
-    table.view.sortByColumn(3, Qt.DescendingOrder)  # similarity, highest first
-    shown = [table.proxy.index(r, 3).data() for r in range(table.proxy.rowCount())]
+    table.view.sortByColumn(6, Qt.DescendingOrder)  # similarity, highest first
+    shown = [table.proxy.index(r, 6).data() for r in range(table.proxy.rowCount())]
     assert shown == sorted(shown, reverse=True)
     assert table.selected_key() == selected  # the selection follows its row
     qtbot.keyClick(table.view, Qt.Key_C)
     only = table.filter.findText("Confirmed")
     table.filter.setCurrentIndex(only)
     assert table.proxy.rowCount() == 1
-    assert table.proxy.index(0, 6).data() == "confirmed"
-    table.filter.setCurrentIndex(table.filter.findText("Undecided (auto)"))
+    assert table.proxy.index(0, 1).data() == "confirmed"
+    table.filter.setCurrentIndex(table.filter.findText("Undecided (candidate + auto)"))
     assert table.proxy.rowCount() == len(w.doc.loop_rows()) - 1
 
 

@@ -1,0 +1,24 @@
+"""The application model: everything the desktop app knows and decides, without Qt.
+
+The Qt window (``gui.main_window`` and its views) is a thin layer over this package:
+it shows the model and turns clicks and keys into model calls. Nothing here imports
+Qt (import-linter contract "gui.model never imports Qt" in pyproject.toml, checked by
+tests/test_layers.py), so the model is tested in plain Python (tests/test_app_model.py).
+
+* ``document``: the open map (``MapDocument``): descriptors, map, poses, decisions.
+* ``history``: undo/redo of plain command objects (``History``, ``Command``).
+* ``commands``: the decisions as commands (status, manual loops, labels).
+* ``queue``: the review queue (``ReviewQueue``): ranking, filters, counts, bulk actions.
+* ``keys``: the one table of keyboard shortcuts.
+* ``journal``: decision records (what the write-through journal stores) and their replay.
+* ``similarity``: the node similarity matrix with a picture-sized preview.
+* ``loop_key``: loops addressed by the source frames of their two nodes.
+"""
+
+from .commands import AddManualLoop, RemoveLoop, SetLabel, SetStatuses
+from .document import LoopKey, LoopRow, MapDocument
+from .history import Command, History
+from .queue import ReviewQueue
+
+__all__ = ["AddManualLoop", "Command", "History", "LoopKey", "LoopRow", "MapDocument", "RemoveLoop",
+           "ReviewQueue", "SetLabel", "SetStatuses"]
