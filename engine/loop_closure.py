@@ -141,19 +141,22 @@ INLIERS_PER_Z = 20.0
 def one_per_place(c: Matches, radius: int) -> np.ndarray:
     """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
     both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
-    ``radius`` nodes or so, not one per node pair."""
+    ``radius`` nodes or so, not one per node pair. Kept matches are bucketed on a grid of
+    ``radius + 1`` nodes, so each test looks at nine buckets, not at every kept match."""
     keep = np.ones(len(c), bool)
     order = np.lexsort((c.b, c.a, -c.confidence))
-    taken_a: list[int] = []
-    taken_b: list[int] = []
+    cell = max(int(radius), 0) + 1
+    buckets: dict[tuple[int, int], list[tuple[int, int]]] = {}
     for i in order:
-        if taken_a:
-            ta, tb = np.asarray(taken_a), np.asarray(taken_b)
-            if np.any((np.abs(ta - c.a[i]) <= radius) & (np.abs(tb - c.b[i]) <= radius)):
-                keep[i] = False
-                continue
-        taken_a.append(int(c.a[i]))
-        taken_b.append(int(c.b[i]))
+        ai, bi = int(c.a[i]), int(c.b[i])
+        ka, kb = ai // cell, bi // cell
+        near = any(abs(ta - ai) <= radius and abs(tb - bi) <= radius
+                   for da in (-1, 0, 1) for db in (-1, 0, 1)
+                   for ta, tb in buckets.get((ka + da, kb + db), ()))
+        if near:
+            keep[i] = False
+        else:
+            buckets.setdefault((ka, kb), []).append((ai, bi))
     return keep
 
 
@@ -225,8 +228,12 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     Automatic: strong geometry (``auto_inliers``, ``auto_inlier_ratio``, and ``auto_lift``
     times the inliers each end shares with its own path neighbour) on a match at least at
     ``candidate_z``; or, where geometry is not known (descriptors from another program), a
-    high score (``auto_z``) with strong support along the stretch (``auto_support``). A
-    candidate is any other match at ``candidate_z`` or with strong geometry alone."""
+    high score (``auto_z``) with strong support along the stretch (``auto_support``).
+    A candidate for review is any other match at ``candidate_z`` whose confidence (score,
+    support and geometry together) reaches ``candidate_confidence``: a node's best match in a
+    large recording is a few standard deviations up by chance alone (the best of 25,000
+    unrelated scores is about 4), but then nothing along the stretch or in the geometry
+    agrees with it."""
     geo_strong = ((c.inliers >= params.auto_inliers)
                   & (np.nan_to_num(c.inlier_ratio) >= params.auto_inlier_ratio)
                   & (c.inliers >= params.auto_lift * np.maximum(c.path_inliers, 0)))
@@ -234,7 +241,7 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     sup = np.nan_to_num(c.support, nan=-np.inf)
     auto = ((geo_strong & (c.score >= params.candidate_z))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
-    cand = ~auto & ((c.score >= params.candidate_z) | geo_strong)
+    cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))
 
 

@@ -71,6 +71,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "a match becomes a candidate for review at this calibrated score (standard "
               "deviations above the two nodes' own background)",
               "chosen on the first synthetic family (benchmarks/bench_families.py --tune)", 0.0, 100.0),
+    Parameter("candidate_confidence", float, 6.0, _NEW,
+              "a candidate for review also needs this confidence (score + support + geometry "
+              "beyond the path's own, in standard deviations)",
+              "chosen on the first synthetic family", 0.0, 100.0),
     Parameter("support_half", int, 3, _NEW,
               "nodes on each side of a candidate averaged along its stretch (forward or reverse)",
               "chosen on the first synthetic family", 1, 50),
@@ -114,6 +118,7 @@ class MapParams:
     long_runs: bool = True
     retrieval_k: int = 10
     candidate_z: float = 3.0
+    candidate_confidence: float = 6.0
     support_half: int = 3
     auto_z: float = 5.0
     auto_support: float = 3.0

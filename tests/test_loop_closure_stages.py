@@ -27,7 +27,8 @@ def test_one_loop_per_place_keeps_the_most_confident_of_a_cluster_and_separate_p
 def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate():
     c = matches(a=[0, 0, 0, 0], b=[20, 40, 60, 80],
                 score=[P.candidate_z + 0.5, P.candidate_z + 0.5, P.candidate_z - 0.5, 1.0],
-                inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05])
+                inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05],
+                confidence=[20, P.candidate_confidence, 20, 20])
     assert tiers(c, P).tolist() == ["auto", "candidate", "", ""]
 
 
@@ -36,13 +37,13 @@ def test_geometry_no_stronger_than_between_path_neighbours_is_not_enough_for_an_
     # their own path neighbours: the same scene, not the same place.
     strong = P.auto_inliers * 3
     c = matches(a=[0, 30], b=[60, 90], score=[P.candidate_z + 1] * 2, inliers=[strong, strong],
-                ratio=[0.8, 0.8], path=[strong // 4, strong])
+                ratio=[0.8, 0.8], path=[strong // 4, strong], confidence=[20, 20])
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
 def test_without_geometry_only_score_and_support_together_make_an_automatic_loop():
     c = matches(a=[0, 0, 0], b=[20, 40, 60], score=[P.auto_z + 1, P.auto_z + 1, P.candidate_z + 0.1],
-                support=[P.auto_support + 1, 0.0, P.auto_support + 1])
+                support=[P.auto_support + 1, 0.0, P.auto_support + 1], confidence=[20, 20, 20])
     assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
 
 
@@ -73,3 +74,10 @@ def test_the_consistent_majority_wins_over_one_more_confident_outlier():
                 yaw=[180.0, 181.0, 178.0, 90.0], confidence=[5, 5, 5, 9])
     status = np.array(["auto"] * 4, dtype=object)
     assert consistency(c, status, headings, P).tolist() == ["auto", "auto", "auto", "candidate"]
+
+
+def test_a_high_score_that_nothing_else_agrees_with_is_not_even_a_candidate():
+    # The best of thousands of unrelated matches is a few standard deviations up by chance.
+    c = matches(a=[0, 0], b=[20, 40], score=[P.candidate_z + 1] * 2, support=[0.0, 4.0],
+                confidence=[P.candidate_z + 1, P.candidate_z + 5])
+    assert tiers(c, P).tolist() == ["", "candidate"]
