@@ -225,9 +225,9 @@ def confidence(c: Matches) -> np.ndarray:
 def tiers(c: Matches, params: MapParams) -> np.ndarray:
     """Stage 7: "auto", "candidate" or "" (dropped) for every match.
 
-    Automatic: strong geometry (``auto_inliers``, ``auto_inlier_ratio``, and ``auto_lift``
-    times the inliers each end shares with its own path neighbour) on a match at least at
-    ``candidate_z``; or, where geometry is not known (descriptors from another program), a
+    Automatic: geometry (``auto_inliers``, and ``auto_lift`` times the inliers each end shares
+    with its own path neighbour) on a match at least at ``candidate_z`` whose confidence (all
+    the evidence together) reaches ``auto_confidence``; or, where geometry is not known (descriptors from another program), a
     high score (``auto_z``) with strong support along the stretch (``auto_support``).
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
     support and geometry together) reaches ``candidate_confidence``: a node's best match in a
@@ -235,11 +235,10 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     unrelated scores is about 4), but then nothing along the stretch or in the geometry
     agrees with it."""
     geo_strong = ((c.inliers >= params.auto_inliers)
-                  & (np.nan_to_num(c.inlier_ratio) >= params.auto_inlier_ratio)
                   & (c.inliers >= params.auto_lift * np.maximum(c.path_inliers, 0)))
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    auto = ((geo_strong & (c.score >= params.candidate_z))
+    auto = ((geo_strong & (c.score >= params.candidate_z) & (c.confidence >= params.auto_confidence))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))

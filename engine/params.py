@@ -88,9 +88,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "two-view inliers for an automatic loop",
               "the probe of issue 13 (false pairs at most 40 outdoors); chosen on the first family",
               0, 100_000),
-    Parameter("auto_inlier_ratio", float, 0.3, _NEW,
-              "share of matches that are inliers for an automatic loop",
-              "chosen on the first synthetic family", 0.0, 1.0),
+    Parameter("auto_confidence", float, 16.0, _NEW,
+              "confidence (score + support + inliers beyond the path's own / 20) of an automatic loop",
+              "chosen on the first synthetic family (seeds 0-4, benchmarks/sweep_families.py): the "
+              "lowest value with no wrong automatic loop there", 0.0, 1000.0),
     Parameter("auto_lift", float, 1.5, _NEW,
               "an automatic loop shares this many times the inliers each end shares with its own "
               "path neighbour just outside the temporal window",
@@ -123,7 +124,7 @@ class MapParams:
     auto_z: float = 5.0
     auto_support: float = 3.0
     auto_inliers: int = 40
-    auto_inlier_ratio: float = 0.3
+    auto_confidence: float = 16.0
     auto_lift: float = 1.5
     place_radius: int = 4
     heading_tol: float = 35.0

@@ -28,7 +28,7 @@ def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate()
     c = matches(a=[0, 0, 0, 0], b=[20, 40, 60, 80],
                 score=[P.candidate_z + 0.5, P.candidate_z + 0.5, P.candidate_z - 0.5, 1.0],
                 inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05],
-                confidence=[20, P.candidate_confidence, 20, 20])
+                confidence=[P.auto_confidence, P.candidate_confidence, 20, 20])
     assert tiers(c, P).tolist() == ["auto", "candidate", "", ""]
 
 
@@ -37,7 +37,7 @@ def test_geometry_no_stronger_than_between_path_neighbours_is_not_enough_for_an_
     # their own path neighbours: the same scene, not the same place.
     strong = P.auto_inliers * 3
     c = matches(a=[0, 30], b=[60, 90], score=[P.candidate_z + 1] * 2, inliers=[strong, strong],
-                ratio=[0.8, 0.8], path=[strong // 4, strong], confidence=[20, 20])
+                ratio=[0.8, 0.8], path=[strong // 4, strong], confidence=[P.auto_confidence] * 2)
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
