@@ -190,7 +190,7 @@ def cmd_map(args: argparse.Namespace) -> int:
         poses_cover(poses, topomap.stamps(), str(args.poses))
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
-    topomap.write_graphml(args.output)
+    topomap.write_graphml(args.output, keep_candidates=args.keep_candidates)
     loops = topomap.loops()
     _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
@@ -358,6 +358,8 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
                    help="simple / shift-simple / ours: calibrate the node and loop thresholds not given "
                         "from the recording itself (as the benchmark does) instead of the descriptor's")
     _add_table_parameters(p)
+    p.add_argument("--keep-candidates", action="store_true",
+                   help="verified: also write the loop candidates waiting for review (status 'candidate')")
     p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
                    help="verified-rules: skip the long-run step that finds returns with a lateral offset "
                         "(fewer loops found, fewer false ones)")

@@ -129,7 +129,7 @@ class MainWindow(QMainWindow):
         self.tabs = QTabWidget()
         self.tabs.addTab(self.graph_view, "Graph")
         self.tabs.addTab(self.similarity_view, "Similarity matrix")
-        self.bottom_splitter = bottom = QSplitter(Qt.Horizontal)
+        self.bottom_splitter = bottom = QSplitter(Qt.Vertical)   # table above the pair view (gui.window_layout)
         bottom.addWidget(self.loop_table)
         bottom.addWidget(self.pair_view)
         bottom.setSizes([480, 520])
