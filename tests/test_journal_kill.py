@@ -24,10 +24,10 @@ WRITER = Path(__file__).resolve().parent / "journal_writer.py"
 ROOT = WRITER.parent.parent
 
 
-def run_and_kill(session: Path, period: float, lifetime: float) -> list[int]:
+def run_and_kill(session: Path, period: float, lifetime: float, writer: Path = WRITER) -> list[int]:
     """Start a writer, kill -9 it after ``lifetime`` seconds of writing; the acks it gave."""
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    proc = subprocess.Popen([sys.executable, str(WRITER), str(session), str(period)],
+    proc = subprocess.Popen([sys.executable, str(writer), str(session), str(period)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     acks: list[int] = []
     ready = threading.Event()
@@ -66,3 +66,29 @@ def test_twenty_random_kills_lose_no_decision(tmp_path):
     lost = sorted(set(acked) - set(replayed))
     assert lost == []
     assert replayed == sorted(set(replayed))      # in order, none twice
+
+
+def test_twenty_random_kills_of_the_app_model_lose_no_decision(tmp_path):
+    """The same through what the window runs: the review queue of the Qt-free app model
+    (gui.model) confirms candidates with the recording's journal attached."""
+    from tests.app_decider import candidate_map, key_of
+    from gui.model import journal as records
+
+    session = tmp_path / "walk.mp4.panotopo.json"
+    rng = random.Random()
+    acked: list[int] = []
+    for _ in range(20):
+        acked += run_and_kill(session, period=0.02, lifetime=rng.uniform(0.05, 0.3),
+                              writer=WRITER.parent / "app_decider.py")
+    journal = Journal.open(session)
+    try:
+        decisions = records.replay(journal.replay())
+    finally:
+        journal.close()
+    reopened = candidate_map()
+    reopened.apply_decisions(decisions)
+    confirmed = {(reopened.graph.nodes[u]["frame"], reopened.graph.nodes[v]["frame"])
+                 for u, v, d in reopened.loops(("confirmed",))}
+    assert len(acked) > 20, "too few decisions were made to test anything"
+    lost = [n for n in acked if key_of(n) not in confirmed]
+    assert lost == []
