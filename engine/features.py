@@ -37,6 +37,8 @@ Choices (all in one place):
 
 from __future__ import annotations
 
+import threading
+
 from dataclasses import dataclass
 from typing import Mapping, Optional, Sequence
 
@@ -54,14 +56,13 @@ BAND = (0.08, 0.80)
 ROOT_SCALE = 512.0
 DESC_DIM = 128
 
-_sift = None
+_local = threading.local()   # one detector per thread: the app extracts in two threads at once
 
 
 def _detector():
-    global _sift
-    if _sift is None:
-        _sift = cv2.SIFT_create(FEATURES_MAX, 3, CONTRAST)
-    return _sift
+    if getattr(_local, "sift", None) is None:
+        _local.sift = cv2.SIFT_create(FEATURES_MAX, 3, CONTRAST)
+    return _local.sift
 
 
 @dataclass

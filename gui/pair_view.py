@@ -55,6 +55,7 @@ class PairView(QWidget):
         self.matches_for: Optional[MatchesFor] = self.match_cache
         # The geometry of a new pair is computed in one background thread (~0.2-0.8 s a pair).
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pair-matches")
+        self._closed = False   # set by shutdown: no new background work
         self._pending: set = set()
         self.matchesReady.connect(self._matches_arrived)
         self._image_size = (0, 0)
@@ -276,14 +277,20 @@ class PairView(QWidget):
             return self.matches_for(key), False
         if self.match_cache.has(key):
             return self.match_cache.peek(key), False
+        if self._closed:
+            return None, False
         if key not in self._pending:
             self._pending.add(key)
             future = self._pool.submit(self.match_cache, key)
-            future.add_done_callback(lambda _f, k=key: self._announce(k))
+            future.add_done_callback(lambda f, k=key: None if f.cancelled() else self._announce(k))
         return None, True
 
     def _announce(self, key) -> None:
-        """In the worker thread: tell the UI thread (queued) that ``key`` is done."""
+        """In the worker thread: tell the UI thread (queued) that ``key`` is done. A future
+        cancelled by ``shutdown`` calls back in the UI thread, inside the pool's shutdown:
+        it announces nothing (a refresh would submit to the closing pool and wait forever)."""
+        if self._closed:
+            return
         try:
             self.matchesReady.emit(key)
         except RuntimeError:   # the view was closed meanwhile
@@ -296,6 +303,7 @@ class PairView(QWidget):
 
     def shutdown(self) -> None:
         """Stop the background matching (the window closes)."""
+        self._closed = True
         self._pool.shutdown(wait=True, cancel_futures=True)
 
     def _map_replaced(self) -> None:
