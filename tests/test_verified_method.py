@@ -76,12 +76,17 @@ def test_ours_is_unchanged_by_the_new_default(described):
 
 def test_demo_route_crossing_and_u_turn_both_closed():
     """The demo drives through a crossing, later back over it at 90 degrees, then turns on
-    the spot and drives back: both places get a loop, and nothing else does."""
+    the spot and drives back: both places get a loop (verified-rules) or are shown for review
+    (verified's automatic loops and candidates), and nothing else gets an automatic loop."""
     from engine.benchmark import evaluate_route
 
-    (row,) = evaluate_route("demo", "indoor", seed=0, methods=("verified",), people=2)
-    assert row.fp == 0
-    assert row.events_total == 2 and row.events_found == 2
+    rules, new = evaluate_route("demo", "indoor", seed=0, methods=("verified-rules", "verified"), people=2)
+    assert rules.fp == 0
+    assert rules.events_total == 2 and rules.events_found == 2
+    # The two-tier method: no wrong automatic loop, and both places are in what a person
+    # reviewing the queue is shown (automatic loops and candidates).
+    assert new.fp == 0
+    assert new.events_with_candidates == 2
 
 
 def test_scoring_only_what_a_rule_could_accept_keeps_the_same_loops(described):

@@ -65,7 +65,7 @@ def test_long_runs_can_be_switched_off_from_the_cli(offset_indoor, tmp_path):
     loops = {}
     for flag in ([], ["--no-long-runs"]):
         out = tmp_path / f"map{len(flag)}.graphml"
-        assert main(["map", str(npz), "-o", str(out), *flag]) == 0
+        assert main(["map", str(npz), "-o", str(out), "--method", "verified-rules", *flag]) == 0
         g = igraph.Graph.Read_GraphML(str(out))
         loops[bool(flag)] = sum(1 for e in g.es if e["kind"] == "loop")
         assert int(g["long_runs"]) == (0 if flag else 1)
