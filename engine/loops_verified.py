@@ -74,7 +74,8 @@ import numpy as np
 
 from scipy import ndimage
 
-from .calibrate import robust_stats, zscores
+from .calibrate import zscores
+from .robust import robust_stats
 from .params import MapParams
 from .verify import align_nodes, cumulative_turning, displacement, local_shifts, pair_yaw
 

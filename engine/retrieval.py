@@ -23,7 +23,7 @@ from typing import Optional
 
 import numpy as np
 
-from .calibrate import robust_stats
+from .robust import robust_stats
 
 # Elements of one similarity block (rows x n). A block costs 4 bytes (float32 sims) plus
 # 8 bytes (the int64 index array of np.argpartition) per element: 16M elements is about

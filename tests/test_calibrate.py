@@ -74,7 +74,7 @@ def test_loop_threshold_is_above_the_background():
 
 
 def test_row_medians_with_gaps_match_numpy():
-    from engine.calibrate import robust_stats
+    from engine.robust import robust_stats
 
     rng = np.random.default_rng(3)
     for cols in (1, 2, 7, 8, 384):
