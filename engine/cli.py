@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Callable, Optional, Sequence
 
 from . import __version__
-from .errors import Cancelled, InputError, PanotopoError
+from .errors import Cancelled, PanotopoError
 from .params import METHODS, PARAMETERS, MapParams
 
 EXIT_BAD_INPUT = 2

@@ -109,7 +109,7 @@ def calibrate(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray) -> tuple
     from . import retrieval
 
     cos = retrieval.pair_similarities(vectors, a, b)
-    return cos, retrieval.pair_z(vectors, stats, a, b)
+    return cos, retrieval.zscores(cos, stats, a, b)
 
 
 def support(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray, params: MapParams
@@ -265,14 +265,19 @@ def path_headings(features, columns, node_rows: np.ndarray, shifts: np.ndarray, 
         yaw = _verified(features, node_rows, steps, steps + 1, cache)[:, 3]
         yaw = original_yaw(yaw, shifts[steps], shifts[steps + 1], frame_width)
     if columns is not None and not np.isfinite(yaw).all():
-        from .verify import align_nodes, pair_yaw
-
-        _, sh = align_nodes(columns, steps, steps + 1)
-        yaw = np.where(np.isfinite(yaw), yaw,
-                       pair_yaw(sh, columns.shape[1], shifts[steps], shifts[steps + 1], frame_width))
+        yaw = np.where(np.isfinite(yaw), yaw, column_yaw(columns, steps, steps + 1, shifts, frame_width))
     if features is None and columns is None:
         return None
     return np.concatenate([[0.0], np.cumsum(np.nan_to_num(yaw))])
+
+
+def column_yaw(columns, a: np.ndarray, b: np.ndarray, shifts: np.ndarray, frame_width: int) -> np.ndarray:
+    """Relative heading of the original frames of node pairs (a, b) from their column
+    signatures (``engine.verify``): where geometry gives none."""
+    from .verify import align_nodes, pair_yaw
+
+    _, sh = align_nodes(columns, a, b)
+    return pair_yaw(sh, columns.shape[1], shifts[a], shifts[b], frame_width)
 
 
 def original_yaw(yaw_shifted: np.ndarray, shift_a: np.ndarray, shift_b: np.ndarray, frame_width: int) -> np.ndarray:
@@ -354,11 +359,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     c.path_inliers = geo["path_inliers"]
     c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
     if columns is not None and len(c):
-        from .verify import align_nodes, pair_yaw
-
-        _, sh = align_nodes(columns, c.a, c.b)
-        column_yaw = pair_yaw(sh, columns.shape[1], shifts[c.a], shifts[c.b], frame_width)
-        c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw)
+        c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
     c.confidence = confidence(c)                                       # 6
     status = tiers(c, params)                                          # 7
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)

@@ -307,7 +307,7 @@ def background(vectors: np.ndarray, exclude: int, sample: int = BACKGROUND_SAMPL
     return Background(mean.astype(np.float32), np.maximum(std, _SD_FLOOR).astype(np.float32), int(exclude))
 
 
-def _z(sims: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def zscores(sims: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Symmetric z of pair (a, b): sim against the mean of both backgrounds,
     z = (s - (mu_a + mu_b) / 2) / sqrt((sd_a^2 + sd_b^2) / 2). A pair is one place
     seen twice, so both rows' ideas of "different place" count equally, and z(a, b) ==
@@ -321,7 +321,7 @@ def pair_z(vectors: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray)
     """Calibrated z-score of arbitrary pairs (a_k, b_k)."""
     a = np.asarray(a, np.int64)
     b = np.asarray(b, np.int64)
-    return _z(pair_similarities(np.asarray(vectors, np.float32), a, b), stats, a, b)
+    return zscores(pair_similarities(np.asarray(vectors, np.float32), a, b), stats, a, b)
 
 
 def calibrated(neigh: Neighbours, stats: Background) -> np.ndarray:
@@ -331,7 +331,7 @@ def calibrated(neigh: Neighbours, stats: Background) -> np.ndarray:
     b = neigh.index.ravel()
     ok = b >= 0
     z = np.full(n * k, np.nan, np.float32)
-    z[ok] = _z(neigh.sim.ravel()[ok], stats, a[ok], b[ok])
+    z[ok] = zscores(neigh.sim.ravel()[ok], stats, a[ok], b[ok])
     return z.reshape(n, k)
 
 
