@@ -20,8 +20,10 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
   (+1 same way, -1 reverse), ``matches`` and ``inliers`` int (local features matched and
   consistent with one two-view model on the sphere), ``inlier_ratio`` float, ``path_inliers``
   int (the same measured between each end and its own path neighbour just outside the
-  temporal window: what "a few metres along the path" shares), ``confidence`` float (the
-  ranking of the review queue).
+  temporal window: what "a few metres along the path" shares), ``step_inliers`` int (the
+  same with the next node along the path, the smaller of the two ends), ``confidence`` float (the
+  ranking of the review queue), ``closure`` float (node steps by which the dead-reckoned
+  path between the two ends misses meeting again).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -53,9 +55,9 @@ _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label"
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
-               "path_inliers": int, "confidence": float}
+               "path_inliers": int, "confidence": float, "closure": float, "step_inliers": int}
 EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
-                 "confidence")
+                 "step_inliers", "confidence", "closure")
 # Graph attributes: every map parameter with its declared type (bools stored as 0/1).
 _GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
                 **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}

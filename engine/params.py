@@ -88,20 +88,29 @@ PARAMETERS: tuple[Parameter, ...] = (
               "two-view inliers for an automatic loop",
               "the probe of issue 13 (false pairs at most 40 outdoors); chosen on the first family",
               0, 100_000),
-    Parameter("auto_confidence", float, 16.0, _NEW,
-              "confidence (score + support + inliers beyond the path's own / 20) of an automatic loop",
-              "chosen on the first synthetic family (seeds 0-4, benchmarks/sweep_families.py): the "
-              "lowest value with no wrong automatic loop there", 0.0, 1000.0),
-    Parameter("auto_lift", float, 1.5, _NEW,
-              "an automatic loop shares this many times the inliers each end shares with its own "
-              "path neighbour just outside the temporal window",
-              "chosen on the first synthetic family", 0.0, 100.0),
+    Parameter("auto_step_share", float, 1.0, _NEW,
+              "an automatic loop's ends share at least this share of the inliers each end "
+              "shares with its next node along its own path (the same place is as close as "
+              "one node step)",
+              "chosen on the first synthetic family (seeds 0-4): 1.0 left no wrong automatic "
+              "loop there, 0.9 four (views 1.0-1.4 m apart)", 0.0, 100.0),
     Parameter("place_radius", int, 4, _NEW,
               "one loop per place: a loop must be the most confident within this many nodes "
               "on both ends", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
     Parameter("heading_tol", float, 35.0, _NEW,
               "degrees a cycle of path and two loops may miss closing (plus drift along the path)",
               "chosen on the first synthetic family", 0.0, 180.0),
+    Parameter("closure_slack", float, 2.0, _NEW,
+              "node steps the dead-reckoned path between an automatic loop's ends may miss "
+              "meeting, plus closure_rate per step along it",
+              "chosen on the first synthetic family (seeds 0-4): the two visits of a place "
+              "on a short return miss by 2 steps at most", 0.0, 1e6),
+    Parameter("closure_rate", float, 0.6, _NEW,
+              "share of the path length between an automatic loop's ends that dead reckoning "
+              "may miss meeting (heading and step-length drift)",
+              "chosen on the first synthetic family (seeds 0-4): true loops miss by up to 0.53 "
+              "of the path (one wrong turn indoors); a corridor repeating 9 steps later misses "
+              "by all 9", 0.0, 10.0),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 
@@ -124,10 +133,11 @@ class MapParams:
     auto_z: float = 5.0
     auto_support: float = 3.0
     auto_inliers: int = 40
-    auto_confidence: float = 16.0
-    auto_lift: float = 1.5
+    auto_step_share: float = 1.0
     place_radius: int = 4
     heading_tol: float = 35.0
+    closure_slack: float = 2.0
+    closure_rate: float = 0.6
 
     def resolved(self, defaults: dict) -> "MapParams":
         """Fill every None from a descriptor's ``defaults``."""

@@ -408,13 +408,14 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
 
     Returns arrays of len(a): ``inliers``, ``matches`` (int64), ``inlier_ratio`` (float32),
     ``yaw_deg`` (float64, of the frames as stored: add the shifts back with
-    ``yaw_of_originals``; NaN for model 'none') and ``model`` (int8, ``MODEL_CODES``).
+    ``yaw_of_originals``; NaN for model 'none'), ``model`` (int8, ``MODEL_CODES``) and
+    ``motion_deg`` (``motion_azimuth`` of the essential model; NaN for the other models).
     """
     a, b = np.asarray(a, np.int64).ravel(), np.asarray(b, np.int64).ravel()
     n = a.size
     out = {"inliers": np.zeros(n, np.int64), "matches": np.zeros(n, np.int64),
            "inlier_ratio": np.zeros(n, np.float32), "yaw_deg": np.full(n, np.nan),
-           "model": np.zeros(n, np.int8)}
+           "model": np.zeros(n, np.int8), "motion_deg": np.full(n, np.nan)}
     cache: dict[int, LocalFeatures] = {}
 
     def feats(i: int) -> LocalFeatures:
@@ -429,4 +430,13 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
         out["model"][k] = MODEL_CODES[tv.model]
         if tv.yaw_deg is not None:
             out["yaw_deg"][k] = tv.yaw_deg
+        if tv.model == "essential" and tv.translation is not None:
+            out["motion_deg"][k] = motion_azimuth(tv.rotation, tv.translation)
     return out
+
+
+def motion_azimuth(r: np.ndarray, t: np.ndarray) -> float:
+    """Direction (degrees, anticlockwise from a's forward axis, in (-180, 180]) in which b's
+    centre lies seen from a, for ``X_b = R X_a + t``: b's centre is ``-R^T t`` in a's frame."""
+    c = -np.asarray(r, np.float64).T @ np.asarray(t, np.float64)
+    return float(np.degrees(np.arctan2(c[1], c[0])))
