@@ -243,7 +243,7 @@ def confidence(c: Matches) -> np.ndarray:
 def tiers(c: Matches, params: MapParams) -> np.ndarray:
     """Stage 7: "auto", "candidate" or "" (dropped) for every match.
 
-    Automatic: a match at least at ``candidate_z`` whose two views share ``auto_inliers``
+    Automatic: a match at least at ``auto_geometry_z`` whose two views share ``auto_inliers``
     two-view inliers and at least ``auto_step_share`` times what each end shares with its
     next node along its own path (``step_inliers``). A topological node is a stretch of path
     whose views are alike; two visits are the same place when they are as alike as one
@@ -262,7 +262,7 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     geo_strong = (c.inliers >= params.auto_inliers) & (c.inliers >= params.auto_step_share * step)
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    auto = ((geo_strong & (c.score >= params.candidate_z))
+    auto = ((geo_strong & (c.score >= params.auto_geometry_z))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))

@@ -1,4 +1,4 @@
-"""Stages 5-8 of the verified method on plain arrays (engine.loop_closure)."""
+"""Stages 4-9 of the verified method on plain arrays (engine.loop_closure)."""
 
 import numpy as np
 
@@ -8,14 +8,14 @@ from engine.params import MapParams
 P = MapParams()
 
 
-def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confidence=None, path=None):
+def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confidence=None, path=None, step=None):
     n = len(a)
     arr = lambda v, default, dt=np.float64: np.asarray(v if v is not None else [default] * n, dt)  # noqa: E731
     return Matches(a=np.asarray(a, np.int64), b=np.asarray(b, np.int64), cosine=arr(None, 0.5, np.float32),
                    score=arr(score, 0.0), support=arr(support, 0.0), direction=np.ones(n, np.int64),
                    matches=arr(inliers, -1, np.int64) * 2, inliers=arr(inliers, -1, np.int64),
                    inlier_ratio=arr(ratio, np.nan), yaw=arr(yaw, np.nan), path_inliers=arr(path, -1, np.int64),
-                   confidence=arr(confidence if confidence is not None else score, 0.0))
+                   step_inliers=arr(step, -1, np.int64), confidence=arr(confidence if confidence is not None else score, 0.0))
 
 
 def test_one_loop_per_place_keeps_the_most_confident_of_a_cluster_and_separate_places():
@@ -28,16 +28,17 @@ def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate()
     c = matches(a=[0, 0, 0, 0], b=[20, 40, 60, 80],
                 score=[P.candidate_z + 0.5, P.candidate_z + 0.5, P.candidate_z - 0.5, 1.0],
                 inliers=[P.auto_inliers * 2, 5, 5, 2], ratio=[0.6, 0.1, 0.1, 0.05],
-                confidence=[P.auto_confidence, P.candidate_confidence, 20, 20])
+                confidence=[P.candidate_confidence + 10, P.candidate_confidence, 20, 20])
     assert tiers(c, P).tolist() == ["auto", "candidate", "", ""]
 
 
-def test_geometry_no_stronger_than_between_path_neighbours_is_not_enough_for_an_automatic_loop():
-    # Two views 6 nodes apart along one street share as much as the loop's ends share with
-    # their own path neighbours: the same scene, not the same place.
+def test_two_views_sharing_less_than_one_node_step_are_not_an_automatic_loop():
+    # Views a couple of metres apart share many inliers, but fewer than each end shares with
+    # its next node along its own path: the same scene, not the same place.
     strong = P.auto_inliers * 3
     c = matches(a=[0, 30], b=[60, 90], score=[P.candidate_z + 1] * 2, inliers=[strong, strong],
-                ratio=[0.8, 0.8], path=[strong // 4, strong], confidence=[P.auto_confidence] * 2)
+                ratio=[0.8, 0.8], step=[strong - 1, int(strong / P.auto_step_share) + 20],
+                confidence=[P.candidate_confidence + 10] * 2)
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
@@ -81,3 +82,20 @@ def test_a_high_score_that_nothing_else_agrees_with_is_not_even_a_candidate():
     c = matches(a=[0, 0], b=[20, 40], score=[P.candidate_z + 1] * 2, support=[0.0, 4.0],
                 confidence=[P.candidate_z + 1, P.candidate_z + 5])
     assert tiers(c, P).tolist() == ["", "candidate"]
+
+
+def test_a_loop_whose_path_runs_away_goes_back_to_the_candidates_and_one_that_returns_stays():
+    from engine.loop_closure import closure
+
+    def judged(track, a, b):
+        c = matches(a=[a], b=[b], score=[8])
+        c.closure = np.linalg.norm(track[c.b] - track[c.a], axis=1)
+        return closure(c, np.array(["auto"], dtype=object), track, P).tolist()
+
+    # Out 60 steps east and back: node 120 is where node 0 was.
+    out_and_back = np.stack([60.0 - np.abs(60.0 - np.arange(121.0)), np.zeros(121)], axis=1)
+    assert judged(out_and_back, 0, 120) == ["auto"]
+    # One straight street: nodes 20 and 180 are 160 steps apart by the path's own account,
+    # two places that look alike, whatever the views say.
+    street = np.stack([np.arange(200.0), np.zeros(200)], axis=1)
+    assert judged(street, 20, 180) == ["candidate"]

@@ -143,7 +143,7 @@ def test_verify_pairs_gives_one_row_per_pair(pano):
     table = FeatureTable.from_list([extract(pano), extract(rolled), extract(np.roll(pano[::-1], 50, axis=1)),
                                     LocalFeatures(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.uint8))])
     out = verify_pairs(table, np.array([0, 0, 0]), np.array([1, 2, 3]))
-    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model"}
+    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model", "motion_deg"}
     assert all(v.shape == (3,) for v in out.values())
     assert out["model"][0] == MODEL_CODES["rotation"] and out["inliers"][0] > 5 * out["inliers"][1]
     assert abs(_wrap(out["yaw_deg"][0] - relative_yaw(pano, rolled)[0])) < 2.0
