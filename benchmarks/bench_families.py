@@ -38,7 +38,8 @@ from engine.benchmark import Row, score_map  # noqa: E402
 from engine.descriptors.base import Descriptors  # noqa: E402
 from engine.frames import Frame  # noqa: E402
 from engine.params import MapParams  # noqa: E402
-from engine.pipeline import DescribeSettings, build_map, describe_frames  # noqa: E402
+from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
+from engine.run import run as run_map  # noqa: E402
 from engine.poses import Poses  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -185,7 +186,7 @@ def run(family: str, seeds, methods, cache: Path, params: dict) -> list[Row]:
                 p = MapParams(**{**p.as_dict(), **paper_thresholds(d.vectors)})
             if family == "real":
                 p = MapParams(**{**p.as_dict(), "node_sim_th": 0.999})   # every photo a node
-            rows.append(score_map(build_map(d, p), poses, case, m, nn, fps))
+            rows.append(score_map(run_map(d, p).topomap, poses, case, m, nn, fps))
         print(f"{case.name}: {len(d)} frames, mapped in {time.perf_counter() - t0:.1f} s",
               file=sys.stderr, flush=True)
     return rows

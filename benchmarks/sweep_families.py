@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_families as bf  # noqa: E402
 from engine.benchmark import score_map, sum_rows  # noqa: E402
 from engine.params import BY_NAME, MapParams  # noqa: E402
-from engine.pipeline import build_map  # noqa: E402
+from engine.run import run as run_map  # noqa: E402
 
 
 def main() -> None:
@@ -45,7 +45,7 @@ def main() -> None:
         p = MapParams(**dict(zip(names, combo)))
         rows = []
         for case, d, poses, fps in recordings:
-            rows.append(score_map(build_map(d, p), poses, case, "verified", bf.EVAL_NN, fps))
+            rows.append(score_map(run_map(d, p).topomap, poses, case, "verified", bf.EVAL_NN, fps))
         t = sum_rows(rows, "verified")
         worst = sorted((r for r in rows if r.fp), key=lambda r: -r.fp)[:3]
         where = ", ".join(f"{r.route}/{r.look}/s{r.seed}:{r.fp}" for r in worst)

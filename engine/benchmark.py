@@ -21,7 +21,8 @@ from .descriptors.base import Descriptors
 from .evaluate import evaluate
 from .frames import Frame
 from .params import METHODS, SHIFTED_METHODS, MapParams
-from .pipeline import DescribeSettings, build_map, describe_frames
+from .pipeline import DescribeSettings, describe_frames
+from .run import run
 from .poses import Poses
 from .synth import make_recording
 from .synth.routes import make_route
@@ -138,7 +139,7 @@ def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
         p = replace(p, method=method)
         shift = method in SHIFTED_METHODS or method not in ("simple",)
         descs = described.by_shift[shift]
-        topomap = build_map(descs, p)
+        topomap = run(descs, p).topomap
         rows.append(score_map(topomap, described.poses, case, method, eval_nn,
                               float(described.frames_per_second.get(shift, 0.0))))
     return rows

@@ -75,25 +75,34 @@ def _cache(args: argparse.Namespace):
     return DescriptorCache(Path(args.cache_dir) if getattr(args, "cache_dir", None) else None)
 
 
-def _describe(args: argparse.Namespace, shift: bool):
-    from .pipeline import DescribeSettings, describe
+def _describe_settings(args: argparse.Namespace, shift: bool):
+    from .pipeline import DescribeSettings
 
     from .validate import describe_options
 
     options = describe_options(args.descriptor, _descriptor_options(args), name=_argument_name)
-    settings = DescribeSettings(
+    return DescribeSettings(
         descriptor=args.descriptor, interval=args.interval, topic=args.topic,
         shift=shift, options=options, skip_bad_frames=args.skip_bad_frames,
     )
-    bar = _Bar(args.quiet)
-    try:
-        descs = describe(args.input, settings, progress=bar, cache=_cache(args))
-    finally:
-        bar.close()
+
+
+def _report_skipped(args: argparse.Namespace, descs) -> None:
     skipped = descs.meta.get("skipped_frames") or []
     if skipped:
         print(f"panotopo: skipped {len(skipped)} undecodable frame(s) of {args.input} "
               f"(first: {skipped[0]})", file=sys.stderr)
+
+
+def _describe(args: argparse.Namespace, shift: bool):
+    from .pipeline import describe
+
+    bar = _Bar(args.quiet)
+    try:
+        descs = describe(args.input, _describe_settings(args, shift), progress=bar, cache=_cache(args))
+    finally:
+        bar.close()
+    _report_skipped(args, descs)
     return descs
 
 
@@ -146,16 +155,6 @@ def _load_poses(path: str, topic: Optional[str]):
     return read_poses(Path(path), topic=topic)
 
 
-def _recording_poses(args: argparse.Namespace):
-    """Positions the recording carries itself (a photo folder's EXIF GPS); --poses wins."""
-    from .sources import recording_poses
-
-    poses, warnings = recording_poses(Path(args.input), interval=args.interval)
-    for line in warnings:
-        print(f"warning: {line}", file=sys.stderr)
-    return poses
-
-
 def _say(args: argparse.Namespace, text: str) -> None:
     if not args.quiet:
         print(text)
@@ -171,36 +170,28 @@ def cmd_describe(args: argparse.Namespace) -> int:
 
 
 def cmd_map(args: argparse.Namespace) -> int:
-    from .pipeline import build_map, is_descriptor_file
+    from .run import run
 
     params = _map_params(args)
-    descs = _describe(args, shift=params.uses_shift)
-    if args.auto_thresholds:   # thresholds the user did not set: calibrated from this recording
-        from dataclasses import replace
-
-        from .calibrate import paper_thresholds
-
-        found = paper_thresholds(descs.vectors, params.neighbor_node_num)
-        params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
-    topomap = build_map(descs, params, source=str(args.input) if not is_descriptor_file(args.input) else "")
-    poses = _load_poses(args.poses, args.pose_topic) if args.poses else _recording_poses(args)
-    if poses is not None:
-        from .validate import poses_cover
-
-        poses_cover(poses, topomap.stamps(), str(args.poses))
-        x, y = poses.at(topomap.stamps())
-        topomap.set_positions(x, y)
+    poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    bar = _Bar(args.quiet)
+    try:
+        out = run(args.input, params, settings=_describe_settings(args, params.uses_shift), poses=poses,
+                  recording_poses=poses is None, auto_thresholds=args.auto_thresholds,
+                  evaluate=bool(args.plot), progress=bar, cache=_cache(args), poses_name=str(args.poses))
+    finally:
+        bar.close()
+    _report_skipped(args, out.descs)
+    for line in out.warnings:
+        print(f"warning: {line}", file=sys.stderr)
+    topomap = out.topomap
     topomap.write_graphml(args.output, keep_candidates=args.keep_candidates)
     loops = topomap.loops()
     _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
     if args.plot:
         from .plots import plot_map
-        evaluation = None
-        if poses is not None:
-            from .evaluate import evaluate
-            evaluation = evaluate(topomap, poses)
-        plot_map(topomap, poses, evaluation, args.plot)
+        plot_map(topomap, out.poses, out.evaluation, args.plot)
         _say(args, f"wrote {args.plot}")
     return 0
 

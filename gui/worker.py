@@ -19,7 +19,6 @@ from PySide6.QtCore import QObject, QThread, Signal, Slot
 
 from engine.errors import Cancelled, InputError
 from engine.params import MapParams
-from engine.progress import check
 
 
 @dataclass
@@ -51,16 +50,13 @@ class PipelineWorker(QObject):
 
     @Slot()
     def run(self) -> None:
-        from engine.pipeline import build_map, describe
+        from engine.run import run
 
         t0 = time.monotonic()
         try:
-            descs = describe(self.job.path, self.job.settings, progress=self._progress,
-                             cancel=self.cancel, cache=self.job.cache)
-            check(self.cancel)
-            self.progress.emit(0, 0, "building the map")
-            topomap = build_map(descs, self.job.params, source=str(self.job.path))
-            check(self.cancel)
+            out = run(self.job.path, self.job.params, settings=self.job.settings, progress=self._progress,
+                      cancel=self.cancel, cache=self.job.cache)
+            descs, topomap = out.descs, out.topomap
         except Cancelled:
             self.cancelled.emit()
         except InputError as exc:

@@ -2,37 +2,22 @@
 local features and two-view geometry. The global descriptor is a tiny grey thumbnail (made
 here, seconds per route): what is tested is what geometry and the path add to it."""
 
-import cv2
 import numpy as np
 import pytest
+from rendered_routes import described_route
 
 import engine.synth2 as synth2
 from engine import loop_closure
 from engine.descriptors.base import Descriptors
-from engine.features import FeatureTable, extract
 from engine.params import MapParams
 from engine.pipeline import build_map
 
 NN = 5
 
 
-def _described(route: str, seed: int = 0) -> Descriptors:
-    rec = synth2.make_recording(route, seed, width=256)
-    frames = list(rec.frames)
-    grey = [cv2.resize(cv2.cvtColor(f, cv2.COLOR_RGB2GRAY), (32, 16), interpolation=cv2.INTER_AREA) for f in frames]
-    v = np.stack([g.ravel().astype(np.float32) for g in grey])
-    v -= v.mean(axis=1, keepdims=True)
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    n = len(frames)
-    return Descriptors(stamps=np.asarray(rec.stamps, np.float64), frames=np.arange(n), shifts=np.zeros(n, np.int64),
-                       vectors=v, meta={"descriptor": "grey-thumbnail", "shift": True, "frame_width": 256,
-                                        "interval": 1.0},
-                       features=FeatureTable.from_list([extract(f) for f in frames]))
-
-
 @pytest.fixture(scope="module")
 def routes():
-    return {r: _described(r) for r in ("lookalike", "reverse")}
+    return {r: described_route(r) for r in ("lookalike", "reverse")}
 
 
 def _loops_with_distance(descs: Descriptors, route: str):

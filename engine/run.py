@@ -1,0 +1,81 @@
+"""One run: describe, map, position and evaluate a recording.
+
+The command line (``panotopo map``), the desktop app's worker and the benchmarks all call
+``run``; each stage is one call of its own module, in this order:
+
+1. describe   ``engine.pipeline.describe`` (a recording or a descriptors .npz), skipped when
+              ``Descriptors`` are given (the benchmarks describe frames held in memory);
+2. thresholds the paper's thresholds calibrated from the recording, for those not set
+              (``auto_thresholds``; ``engine.calibrate.paper_thresholds``);
+3. map        ``engine.pipeline.build_map``: nodes and loops;
+4. position   node positions from ground-truth ``poses`` (given, or the recording's own:
+              a geotagged photo folder's EXIF GPS) where known;
+5. evaluate   ``engine.evaluate.evaluate`` against those poses, where known and asked.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Optional, Union
+
+from .descriptors.base import Descriptors
+from .params import MapParams
+from .poses import Poses
+
+
+@dataclass
+class RunResult:
+    descs: Descriptors
+    topomap: object                        # engine.graph.TopoMap
+    poses: Optional[Poses] = None          # what positioned the nodes, when known
+    evaluation: Optional[object] = None    # engine.evaluate.Evaluation, when poses and asked
+    warnings: list = field(default_factory=list)
+
+
+def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), *, settings=None,
+        poses: Optional[Poses] = None, recording_poses: bool = False, auto_thresholds: bool = False,
+        evaluate: bool = False, eval_nn: Optional[int] = None, progress=None, cancel=None,
+        cache=None, poses_name: str = "poses") -> RunResult:
+    """Stages 1-5 (module notes). ``settings`` is an ``engine.pipeline.DescribeSettings``
+    (its ``shift`` follows the method); ``recording_poses`` looks for positions in the
+    recording itself when ``poses`` is None; ``eval_nn`` overrides the map's temporal
+    window for evaluation; ``poses_name`` names the poses in an error."""
+    from .pipeline import DescribeSettings, build_map, describe, is_descriptor_file
+    from .progress import check
+
+    warnings: list[str] = []
+    if isinstance(source, Descriptors):                                            # 1
+        descs, name = source, str(source.meta.get("source", ""))
+    else:
+        settings = replace(settings or DescribeSettings(), shift=params.uses_shift)
+        descs = describe(source, settings, progress=progress, cancel=cancel, cache=cache)
+        name = "" if is_descriptor_file(source) else str(source)
+    if auto_thresholds:                                                            # 2
+        from .calibrate import paper_thresholds
+
+        found = paper_thresholds(descs.vectors, params.neighbor_node_num)
+        params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
+    check(cancel)
+    if progress is not None:
+        progress(0, 0, "building the map")
+    topomap = build_map(descs, params, source=name)                                # 3
+    check(cancel)
+    if poses is None and recording_poses and not isinstance(source, Descriptors):   # 4
+        from .sources import recording_poses as own_poses
+
+        interval = settings.interval if settings is not None else 1.0
+        poses, found_warnings = own_poses(Path(source), interval=interval)
+        warnings.extend(found_warnings)
+    if poses is not None:
+        from .validate import poses_cover
+
+        poses_cover(poses, topomap.stamps(), poses_name)
+        x, y = poses.at(topomap.stamps())
+        topomap.set_positions(x, y)
+    evaluation = None
+    if evaluate and poses is not None:                                             # 5
+        from .evaluate import evaluate as score
+
+        evaluation = score(topomap, poses, neighbor_node_num=eval_nn)
+    return RunResult(descs, topomap, poses, evaluation, warnings)
