@@ -96,7 +96,8 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
 
     From the loop arc's evidence attributes (``engine.graph.EVIDENCE_KEYS``: ``score`` and
     ``support`` in standard deviations above the recording's background, ``matches``,
-    ``inliers``, ``inlier_ratio``, ``direction``, ``confidence``); the feature counts of
+    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``closure``, ``direction``, ``confidence``);
+    the feature counts of
     ``matches`` (computed for the view) take the place of the arc's when given.
     """
     attrs = attrs or {}
@@ -117,6 +118,10 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
         ratio_text = f" ({100 * ratio:.0f} %)" if ratio is not None and np.isfinite(ratio) else ""
         out.append(f"inliers {int(inl)}/{int(total)} matches{ratio_text}" if total is not None
                    else f"inliers {int(inl)}{ratio_text}")
+    if num("step_inliers") is not None:
+        out.append(f"one step along the path shares {int(num('step_inliers'))}")
+    if num("closure") is not None:
+        out.append(f"the path meets itself again within {num('closure'):.1f} node steps")
     if num("support") is not None:
         out.append(f"sequence support {num('support'):.1f} σ")
     elif num("window_count"):

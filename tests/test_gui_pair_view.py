@@ -87,11 +87,13 @@ def test_loop_evidence_numbers_are_shown(pair):
     view, _, _ = pair
     view.matches_for = None   # the numbers stored on the loop arc
     g = view.doc.topomap.graph
-    g.edges["n3", "n10"].update(score=4.2, matches=60, inliers=37, inlier_ratio=0.61, support=5.5)
+    g.edges["n3", "n10"].update(score=4.2, matches=60, inliers=37, inlier_ratio=0.61, support=5.5,
+                                step_inliers=33, closure=1.25)
     view.doc._rows = None
     view.show_pair((3, 10))
     text = view.evidence.text()
     assert "4.20" in text and "37/60" in text and "61 %" in text and "support 5.5" in text
+    assert "path shares 33" in text and "within 1.2 node steps" in text
 
 
 def test_real_matches_of_a_revisit_are_aligned_inliers(pair, qtbot):
