@@ -35,7 +35,8 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     candidate tier.
 
 Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
-so re-mapping after a threshold change costs only stages 5-8.
+so re-mapping after a threshold change costs the arithmetic of the stages, not the retrieval
+or the geometry of pairs verified before.
 """
 
 from __future__ import annotations
