@@ -2,7 +2,7 @@
 thresholds on the first family only; development tool, not part of the tests).
 
     python benchmarks/sweep_families.py --family first --seeds 0,1,2,3,4 \
-        --grid auto_lift=1.2,1.5,2 --grid auto_inliers=30,40,60
+        --grid auto_step_share=0.9,1.0,1.1 --grid auto_geometry_z=3,3.5,4
 
 Descriptors come from bench_families.py's cache (run it first). Geometry results are cached
 in memory per recording, so each variant costs only the cheap stages.
