@@ -64,8 +64,7 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
     if poses is None and recording_poses and not isinstance(source, Descriptors):   # 4
         from .sources import recording_poses as own_poses
 
-        interval = settings.interval if settings is not None else 1.0
-        poses, found_warnings = own_poses(Path(source), interval=interval)
+        poses, found_warnings = own_poses(Path(source), interval=settings.interval)
         warnings.extend(found_warnings)
     if poses is not None:
         from .validate import poses_cover

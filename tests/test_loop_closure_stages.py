@@ -90,7 +90,7 @@ def test_a_loop_whose_path_runs_away_goes_back_to_the_candidates_and_one_that_re
     def judged(track, a, b):
         c = matches(a=[a], b=[b], score=[8])
         c.closure = np.linalg.norm(track[c.b] - track[c.a], axis=1)
-        return closure(c, np.array(["auto"], dtype=object), track, P).tolist()
+        return closure(c, np.array(["auto"], dtype=object), P).tolist()
 
     # Out 60 steps east and back: node 120 is where node 0 was.
     out_and_back = np.stack([60.0 - np.abs(60.0 - np.arange(121.0)), np.zeros(121)], axis=1)
