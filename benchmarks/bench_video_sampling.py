@@ -3,15 +3,17 @@
 Run: python benchmarks/bench_video_sampling.py [--cache DIR] [--seconds 120] [--interval 1.0]
 
 Writes once (to ``--cache``, default ~/.cache/panotopo-bench) a 3840x1920 30 fps H.264
-clip with a 2 s GOP (PyAV + libx264, ultrafast preset; the example panorama upscaled and
-rolled 8 px per frame, so every frame is textured and different), then times:
+clip with a key frame every ``--gop`` seconds (default 2; PyAV + libx264, ultrafast preset;
+the example panorama upscaled and rolled 8 px per frame, so every frame is textured and
+different), then times:
 
 1. decoding every frame with OpenCV (``grab()`` only: what the old reader paid to sample);
 2. ``engine.sources.video_av.AvSampler`` at the interval (decoded-frame count included);
-3. ``engine.pipeline.describe_frames`` at the interval through the OpenCV reader and through
-   the PyAV sampler (sample, shift, columns, colours, effnet-vlad; model loaded beforehand).
+3. ``engine.pipeline.describe_source`` (what ``panotopo describe`` runs) at the interval
+   through the OpenCV reader and through the PyAV sampler (sample, read ahead, shift,
+   columns, colours, local features, effnet-vlad; model loaded beforehand).
 
-It prints a table with the ratios to (1) and extrapolates (2) to an hour of 4K30.
+It prints a table with the ratios to (1) and extrapolates every row to an hour of 4K30.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 W, H, FPS, GOP_S, ROLL_PX = 3840, 1920, 30, 2, 8
 
 
-def write_clip(path: Path, seconds: int) -> Path:
+def write_clip(path: Path, seconds: int, gop_s: float = GOP_S, preset: str = "ultrafast") -> Path:
     """The benchmark clip (skipped when it exists)."""
     import av
 
@@ -42,8 +44,8 @@ def write_clip(path: Path, seconds: int) -> Path:
     with av.open(str(tmp), "w") as out:
         stream = out.add_stream("libx264", rate=FPS)
         stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
-        stream.options = {"preset": "ultrafast", "crf": "23",
-                          "x264-params": f"keyint={GOP_S * FPS}:min-keyint={GOP_S * FPS}:scenecut=0"}
+        stream.options = {"preset": preset, "crf": "23",
+                          "x264-params": f"keyint={round(gop_s * FPS)}:min-keyint={round(gop_s * FPS)}:scenecut=0"}
         for i in range(seconds * FPS):
             frame = av.VideoFrame.from_ndarray(np.roll(pano, ROLL_PX * i, axis=1), format="rgb24")
             for packet in stream.encode(frame):
@@ -75,14 +77,13 @@ def time_sampler(path: Path, interval: float) -> tuple[float, int, int, str]:
 
 
 def time_describe(path: Path, interval: float, use_pyav: bool, model) -> tuple[float, int]:
-    """Sampling + shift + descriptors through one reader (the model is loaded beforehand)."""
-    from engine.pipeline import DescribeSettings, describe_frames
+    """What ``panotopo describe`` does, through one reader (the model is loaded beforehand)."""
+    from engine.pipeline import DescribeSettings, describe_source
     from engine.sources import VideoSource
 
     t0 = time.perf_counter()
     with VideoSource(path, use_pyav=use_pyav) as src:
-        descs = describe_frames(src.frames(interval), src.expected_samples(interval),
-                                DescribeSettings(interval=interval), model=model)
+        descs = describe_source(src, DescribeSettings(interval=interval), model, str(path))
     return time.perf_counter() - t0, len(descs)
 
 
@@ -91,14 +92,19 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "panotopo-bench")
     ap.add_argument("--seconds", type=int, default=120)
     ap.add_argument("--interval", type=float, nargs="+", default=[1.0, 2.0])
+    ap.add_argument("--gop", type=float, default=GOP_S, help="seconds between key frames (default 2)")
+    ap.add_argument("--preset", default="ultrafast",
+                    help="libx264 preset of the clip: ultrafast (no CABAC, B-frames or deblocking: the cheapest "
+                         "stream to decode) or e.g. veryfast (CABAC, B-frames, deblocking, as cameras write)")
     ap.add_argument("--write-only", action="store_true")
     ap.add_argument("--no-describe", action="store_true")
     args = ap.parse_args()
     args.cache.mkdir(parents=True, exist_ok=True)
-    clip = args.cache / f"roll_{W}x{H}_{FPS}fps_gop{GOP_S}s_{args.seconds}s.mp4"
+    preset = "" if args.preset == "ultrafast" else f"_{args.preset}"
+    clip = args.cache / f"roll_{W}x{H}_{FPS}fps_gop{args.gop:g}s_{args.seconds}s{preset}.mp4"
     t0 = time.perf_counter()
     existed = clip.exists()
-    write_clip(clip, args.seconds)
+    write_clip(clip, args.seconds, args.gop, args.preset)
     if not existed:
         print(f"wrote {clip} in {time.perf_counter() - t0:.0f} s")
     if args.write_only:
@@ -125,8 +131,7 @@ def main() -> None:
         print(f"| {what} | {t:.1f} | {t / full:.2f} | {k} | {'' if decoded is None else decoded} | {mode} |")
     hour = 3600 * FPS / n
     for what, t, *_ in rows:
-        if what.startswith("AvSampler") or what.startswith("OpenCV"):
-            print(f"an hour of 4K30, {what}: about {t * hour / 60:.1f} min")
+        print(f"an hour of 4K30, {what}: about {t * hour / 60:.1f} min")
 
 
 if __name__ == "__main__":

@@ -10,7 +10,7 @@
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import Iterator, Optional
 
 from . import limits
 from .errors import InputError
@@ -19,10 +19,11 @@ from .frames import Frame, FrameSource
 SKIP_HINT = "to skip undecodable frames, use --skip-bad-frames (in the app: Skip bad frames)"
 
 
-def checked_frames(source: FrameSource, interval: float, skip: bool, skipped: list[int]) -> Iterator[Frame]:
-    """``source.frames(interval)``, skipping frames that cannot be decoded when ``skip``
-    (their indices are appended to ``skipped``)."""
-    stream = source.frames(interval)
+def checked_frames(source: FrameSource, interval: float, skip: bool, skipped: list[int],
+                   max_width: Optional[int] = None) -> Iterator[Frame]:
+    """``source.frames(interval, max_width)``, skipping frames that cannot be decoded when
+    ``skip`` (their indices are appended to ``skipped``)."""
+    stream = source.frames(interval, max_width=max_width)
     last = -1
     while True:
         try:

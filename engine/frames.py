@@ -24,6 +24,12 @@ class Frame:
     index: int          # source frame index in the recording
     stamp: float        # seconds
     rgb: np.ndarray     # H x W x 3 uint8, equirectangular (W == 2 H)
+    source_width: int = 0   # the recording's frame width when ``rgb`` was delivered shrunk (0: rgb's own)
+
+    @property
+    def width(self) -> int:
+        """Columns of the frame in the recording (shifts and yaws are counted in these)."""
+        return self.source_width or int(self.rgb.shape[1])
 
 
 def sample_indices(stamps: np.ndarray, interval: float) -> np.ndarray:
@@ -50,7 +56,11 @@ def check_equirectangular(rgb: np.ndarray, where: str) -> None:
     """Raise InputError unless ``rgb`` is an H x 2H x 3 image."""
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise InputError(f"{where}: expected a colour image, got shape {rgb.shape}")
-    h, w = rgb.shape[:2]
+    check_equirectangular_size(int(rgb.shape[1]), int(rgb.shape[0]), where)
+
+
+def check_equirectangular_size(w: int, h: int, where: str) -> None:
+    """Raise InputError unless a ``w`` x ``h`` frame is a 2:1 panorama within the size limits."""
     if w != 2 * h:
         raise InputError(
             f"{where}: frame is {w}x{h}, not an equirectangular 2:1 panorama"
@@ -96,8 +106,13 @@ class FrameSource(ABC):
         exactly costs a pass over the recording; used for progress only)."""
         return int(self.sample_indices(interval).size)
 
-    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
-        """Frames sampled every ``interval`` seconds, in order."""
+    def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
+        """Frames sampled every ``interval`` seconds, in order.
+
+        ``max_width``: the caller will shrink frames to this many columns anyway; a reader
+        that can deliver them shrunk more cheaply than at full size does (area averaging,
+        ``Frame.source_width`` set), the others ignore it.
+        """
         for i in self.sample_indices(interval):
             yield self.frame_at(int(i))
 

@@ -16,7 +16,7 @@ import numpy as np
 from . import descriptors as descriptor_registry
 from .descriptors.base import Descriptors
 from .errors import InputError
-from .frames import Frame, open_source
+from .frames import Frame, FrameSource, open_source
 from .params import MapParams
 from .progress import CancelToken, Progress, check
 
@@ -69,23 +69,33 @@ def describe(
     if cache is not None:
         key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
-                         "features": FEATURES_VERSION, **model.settings()})
+                         "features": FEATURES_VERSION, "work_width": work_width(model), **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
 
-    from .frame_guard import check_describe_memory, checked_frames
-
     with open_source(path, topic=settings.topic, interval=settings.interval) as source:
-        expected = source.expected_samples(settings.interval)
-        check_describe_memory(expected, model, str(path))
-        skipped: list[int] = []
-        frames = checked_frames(source, settings.interval, settings.skip_bad_frames, skipped)
-        result = describe_frames(frames, expected, settings,
-                                 model=model, source=str(path), progress=progress, cancel=cancel)
-        result.meta["skipped_frames"] = skipped
+        result = describe_source(source, settings, model, str(path), progress, cancel)
     if cache is not None and key is not None:
         cache.store(key, result)
+    return result
+
+
+def describe_source(source: FrameSource, settings: DescribeSettings, model, where: str = "",
+                    progress: Optional[Progress] = None, cancel: Optional[CancelToken] = None) -> Descriptors:
+    """Descriptors of an open recording: frames sampled, decoded in a thread while the previous
+    ones are described (``engine.prefetch``), delivered no wider than the working copy."""
+    from .frame_guard import check_describe_memory, checked_frames
+    from .prefetch import prefetched
+
+    expected = source.expected_samples(settings.interval)
+    check_describe_memory(expected, model, where)
+    skipped: list[int] = []
+    frames = prefetched(checked_frames(source, settings.interval, settings.skip_bad_frames, skipped,
+                                       max_width=work_width(model)))
+    result = describe_frames(frames, expected, settings, model=model, source=where,
+                             progress=progress, cancel=cancel)
+    result.meta["skipped_frames"] = skipped
     return result
 
 
@@ -121,21 +131,23 @@ def describe_frames(
     features: list = []
     frame_width: list[int] = []
 
+    columns_wide = work_width(model)
+
     def shifted_images() -> Iterator[np.ndarray]:
         for frame in frames:
             check(cancel)
-            work = working_copy(frame.rgb)
+            work = working_copy(frame.rgb, columns_wide)
             s_work = canonical_shift(work) if settings.shift else 0
             stamps.append(frame.stamp)
             indices.append(frame.index)
             # The shift is stored in columns of the source frame (the contract).
-            shifts.append(int(round(s_work * frame.rgb.shape[1] / work.shape[1])) % frame.rgb.shape[1])
+            shifts.append(int(round(s_work * frame.width / work.shape[1])) % frame.width)
             rgb = apply_shift(work, s_work) if s_work else work
             columns.append(column_features(rgb))
             colours.append(colour_histogram(rgb))
             features.append(extract(rgb))
             if not frame_width:
-                frame_width.append(int(frame.rgb.shape[1]))
+                frame_width.append(frame.width)
             yield rgb
 
     vectors = model.describe(shifted_images(), count=int(count), progress=progress, cancel=cancel)
@@ -163,21 +175,32 @@ def describe_frames(
     )
 
 
-# Every per-frame step of describing works on frames at most this wide: the largest input of
-# any descriptor is 644 columns (MegaLoc/BoQ at 322x644), local features use 256 columns,
-# column signatures and colour histograms fewer. A 3840x1920 frame cost 0.35-0.6 s in those
-# steps (mostly resizing and rolling 22 MB); shrunk once with area averaging it costs ~15 ms.
-WORK_WIDTH = 2048
+# Every per-frame step of describing works on frames at most this wide, or as wide as the
+# descriptor's network input where that is wider (``work_width``): the default inputs are
+# 256 (effnet-vlad), 448 (AnyLoc) and 644 columns (MegaLoc/BoQ at 322x644), local features
+# use 256 columns, column signatures 512, colour histograms fewer. A 3840x1920 frame cost
+# 0.35-0.6 s in those steps at full size (mostly resizing and rolling 22 MB); at 2,048
+# columns 88 ms, at 1,024 columns 36 ms, most of the difference in the descriptor's own
+# resize and the colour histogram (effnet-vlad 46 -> 18 ms, colours 11 -> 2 ms per frame,
+# timed one frame at a time on the 2-core development machine, see
+# benchmarks/results/video_sampling.md). Area averaging to 1,024 and then to 256 columns
+# gives the network nearly the same picture as averaging from 2,048.
+WORK_WIDTH = 1024
 
 
-def working_copy(rgb: np.ndarray) -> np.ndarray:
-    """``rgb`` shrunk (area averaging, 2:1 kept) to at most ``WORK_WIDTH`` columns."""
+def work_width(model) -> int:
+    """Columns of the working copy for ``model``: ``WORK_WIDTH``, or its network input if wider."""
+    return max(WORK_WIDTH, int(model.input_columns()) if model is not None else 0)
+
+
+def working_copy(rgb: np.ndarray, width: int = WORK_WIDTH) -> np.ndarray:
+    """``rgb`` shrunk (area averaging, 2:1 kept) to at most ``width`` columns."""
     h, w = rgb.shape[:2]
-    if w <= WORK_WIDTH:
+    if w <= width:
         return rgb
     import cv2
 
-    return cv2.resize(rgb, (WORK_WIDTH, max(1, round(h * WORK_WIDTH / w))), interpolation=cv2.INTER_AREA)
+    return cv2.resize(rgb, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
 
 
 def descriptor_defaults(descs: Descriptors) -> dict:

@@ -81,6 +81,44 @@ def test_delivered_stamp_and_index_are_those_of_the_delivered_picture(clips, cli
         assert src.expected_samples(interval) == len(got)
 
 
+@pytest.mark.parametrize("clip", ["gop1s", "gop10s"])
+def test_frames_asked_for_narrower_come_shrunk_with_their_full_width_kept(clips, clip):
+    import cv2
+
+    with VideoSource(clips[clip]) as src:
+        full = delivered(src, 1.0)
+        small = list(src.frames(1.0, max_width=W // 2))
+    assert [f.index for f in small] == [f.index for f in full]
+    assert [f.stamp for f in small] == [f.stamp for f in full]
+    for s, f in zip(small, full):
+        assert s.rgb.shape == (H // 2, W // 2, 3) and s.source_width == W and s.width == W
+        assert frame_number(s.rgb) == s.index                      # the same picture, smaller
+        shrunk = cv2.resize(f.rgb, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+        assert np.abs(s.rgb.astype(int) - shrunk).mean() < 8     # area averaging, as OpenCV does
+    with VideoSource(clips[clip]) as src:                       # wider than the frame: full size
+        assert all(f.source_width == 0 and f.rgb.shape[1] == W for f in src.frames(1.0, max_width=4 * W))
+
+
+def test_a_consumer_that_stops_early_leaves_no_decoding_thread_or_open_file(clips):
+    import threading
+
+    with VideoSource(clips["gop1s"]) as src:
+        stream = src.frames(0.5)                   # many decode runs, decoded ahead in threads
+        first = [next(stream) for _ in range(3)]
+        stream.close()
+    assert [frame_number(f.rgb) for f in first] == [f.index for f in first]
+    assert not [t for t in threading.enumerate() if t.name.startswith("panotopo-decode")]
+    fds = Path("/proc/self/fd")
+    if fds.is_dir():                                # Linux: no descriptor left on the clip
+        targets = []
+        for fd in fds.iterdir():
+            try:
+                targets.append(str(fd.resolve()))
+            except OSError:
+                continue
+        assert str(clips["gop1s"].resolve()) not in targets
+
+
 @pytest.mark.parametrize("interval", [1.0, 0.6, 0.7])
 def test_long_gop_still_delivers_the_frame_at_each_sample_time(clips, interval):
     with VideoSource(clips["gop10s"]) as src:

@@ -234,6 +234,9 @@ class _AnyLocBase(DescriptorModel):
             self._model = model.to(self.device)
         return self._model
 
+    def input_columns(self) -> int:
+        return 2 * self.input_height  # resized whole to input_height x 2*input_height, then cropped
+
     def weights_identity(self) -> str:
         if self.weights_path is None:
             return f"{self.arch.checkpoint_name}:official-download"

@@ -160,3 +160,10 @@ class DescriptorModel(ABC):
     def settings(self) -> dict:
         """Everything that changes the output (for the cache key and the .npz meta)."""
         return {"name": self.name}
+
+    def input_columns(self) -> int:
+        """Columns the network resizes each panorama to before any crop (0: unknown).
+
+        Frames wider than this are shrunk before describing (``engine.pipeline.working_copy``),
+        never below it, so a wide network input is not fed an upsampled frame."""
+        return 0

@@ -203,6 +203,9 @@ class EfficientNetVLAD(DescriptorModel):
     def dimension(self) -> int:
         return (1 + self.sectors) * self.vocabulary_size * self.channels
 
+    def input_columns(self) -> int:
+        return self.input_width
+
     def settings(self) -> dict:
         vocab = "map"
         if self.fixed_vocabulary and self.vocabulary is not None:

@@ -197,6 +197,9 @@ class GlobalNetDescriptor(DescriptorModel):
     def output_dim(self) -> int:
         return int(self.network().output_dim)
 
+    def input_columns(self) -> int:
+        return int(self.size[1])
+
     def settings(self) -> dict:
         return {"name": self.name, "weights": self.weights_identity(), "input_size": list(self.size),
                 "precision": "float32" if self.dtype is None else str(self.dtype).removeprefix("torch.")}

@@ -295,9 +295,10 @@ class BagSource(IndexedSource):
                                  f"({_one_line(err)})") from None
         raise InputError(f"{self.path}: frame {index} of {self.topic} vanished from the bag")
 
-    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+    def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
         """Sampled frames in one forward pass over the bag (own reader, so that
-        ``frame_at`` stays usable meanwhile); only the sampled ones are decoded."""
+        ``frame_at`` stays usable meanwhile); only the sampled ones are decoded.
+        Full size whatever ``max_width`` (decoding is not where a bag's time goes)."""
         wanted = sample_indices(self._stamps, interval)
         if not self._in_bag_order:
             yield from super().frames(interval)

@@ -206,17 +206,18 @@ class VideoSource(FrameSource):
             self._last = Frame(index, float(stamps[index]), rgb)
             return self._last
 
-    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
+    def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
         """Sampled frames in one forward pass on a capture of its own.
 
         Picks, for t_k = k * interval, the first frame with stamp >= t_k (each
         frame once), like ``sample_indices``; also fills the stamp cache when the
-        pass reaches the end. With PyAV, the sampler's frames instead (module doc).
+        pass reaches the end. With PyAV, the sampler's frames instead (module doc),
+        shrunk by FFmpeg to ``max_width`` columns; OpenCV's are full size.
         """
         sampler = self._av()
         if sampler is not None:
             self._stamps = sampler.index.stamps.copy()
-            yield from sampler.frames(interval)
+            yield from sampler.frames(interval, max_width=max_width)
             return
         if self._stamps is not None:
             yield from self._frames_known(interval)

@@ -19,6 +19,8 @@ A compressed video can only be decoded from a key frame onwards, so:
    decodes forward to the group's last pick, then drains the decoder. GOPs without
    a pick are never decoded. This decodes the fewest frames either way: seeking per
    sample when the GOP is short, one forward run when several samples share a GOP.
+   Runs are independent, so two threads decode them at once, each on its own
+   container, and the frames are delivered in order.
 
 Delivered frames carry the exact stamp of the decoded frame (its pts), never the
 requested time. ``SampleStats`` tells how many packets went to the decoder.
@@ -26,6 +28,9 @@ requested time. ``SampleStats`` tells how many packets went to the decoder.
 
 from __future__ import annotations
 
+import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -34,7 +39,7 @@ from typing import Iterator, Optional
 import numpy as np
 
 from ..errors import InputError
-from ..frames import Frame, check_equirectangular, sample_indices
+from ..frames import Frame, check_equirectangular_size, sample_indices
 
 try:  # PyAV is optional at run time: VideoSource falls back to OpenCV without it
     import av
@@ -216,56 +221,144 @@ class AvSampler:
             run[2].append(int(i))
         return [tuple(r) for _, r in sorted(runs.items())]
 
-    def frames(self, interval: float = 1.0) -> Iterator[Frame]:
-        """Frames sampled every ``interval`` seconds (see module doc), in order."""
+    def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
+        """Frames sampled every ``interval`` seconds (see module doc), in order.
+
+        Decode runs are independent (each starts at a key frame), so ``DECODE_THREADS``
+        threads decode them at once, each on a container of its own, at most
+        ``RUNS_AHEAD`` runs ahead of the consumer (see ``DECODE_THREADS``).
+
+        With ``max_width``, wider frames come shrunk to it by FFmpeg's area scaler in the
+        same pass that converts them to RGB (``Frame.source_width`` keeps the full width):
+        converting a 3840x1920 frame to RGB and shrinking it with OpenCV afterwards cost
+        23 ms, converting straight to 1024 columns 4 ms (benchmarks/bench_video_sampling.py).
+        """
         plan = self.plan(interval)
         stats = SampleStats(mode=plan.mode)
         self.last_stats = stats
         if plan.indices.size == 0:
             return
+        decoders = _Decoders(self.path, self.index, max_width)
+        pending: deque = deque()
+        pool = ThreadPoolExecutor(max_workers=DECODE_THREADS, thread_name_prefix="panotopo-decode")
         try:
-            container = av.open(str(self.path))
-        except (av.error.FFmpegError, OSError) as err:
-            raise InputError(f"{self.path}: cannot open the video ({_one_line(err)})") from None
-        try:
+            runs = iter(self._runs(plan.indices))
+            for run in runs:
+                pending.append(pool.submit(decoders.decode, run))
+                if len(pending) < RUNS_AHEAD:
+                    continue
+                yield from self._deliver(pending.popleft().result(), stats)
+            while pending:
+                yield from self._deliver(pending.popleft().result(), stats)
+        finally:
+            for future in pending:
+                future.cancel()
+            pool.shutdown(wait=True)
+            decoders.close()
+
+    def _deliver(self, done: "_DecodedRun", stats: SampleStats) -> Iterator[Frame]:
+        stats.runs.append((done.first, done.last))
+        stats.decoded += done.decoded
+        stats.seeks += done.seeks
+        for i, (rgb, source_width) in done.frames:
+            stats.delivered += 1
+            yield Frame(i, float(self.index.stamps[i]), rgb, source_width)
+
+
+# Threads that decode runs at once. A run after a seek starts at a key frame, and FFmpeg
+# decodes one H.264/HEVC key frame on one thread (frame threads need a sequence of frames,
+# camera streams have one slice per frame), so at 1 Hz on key frames one thread was the
+# bottleneck: 34 ms (ultrafast) to 60 ms (veryfast) per 3840x1920 key frame against ~35 ms
+# of describing per sample (benchmarks/bench_video_sampling.py). Two threads use both cores
+# of the machine this was measured on; more would only queue behind the descriptor.
+DECODE_THREADS = 2
+# Runs decoded ahead of the consumer: enough to keep both threads busy while one run is
+# being described, few enough that held frames stay small (at most a few full frames).
+RUNS_AHEAD = 4
+
+
+@dataclass
+class _DecodedRun:
+    first: int
+    last: int
+    frames: list      # (index, (rgb, source_width)) in the run's pick order
+    decoded: int
+    seeks: int
+
+
+class _Decoders:
+    """One container (and packet reader) per decoding thread, closed together at the end."""
+
+    def __init__(self, path: Path, index: StreamIndex, max_width: Optional[int]) -> None:
+        self.path, self.index, self.max_width = path, index, max_width
+        self._local = threading.local()
+        self._opened: list = []
+        self._lock = threading.Lock()
+
+    def _reader(self) -> "_PacketReader":
+        reader = getattr(self._local, "reader", None)
+        if reader is None:
+            try:
+                container = av.open(str(self.path))
+            except (av.error.FFmpegError, OSError) as err:
+                raise InputError(f"{self.path}: cannot open the video ({_one_line(err)})") from None
+            with self._lock:
+                self._opened.append(container)
             stream = container.streams.video[0]
             stream.codec_context.thread_type = "AUTO"
-            packets = _PacketReader(container, stream, self.index, stats)
-            for first, last, picks in self._runs(plan.indices):
-                stats.runs.append((first, last))
-                wanted = {int(self.index.pts[i]): i for i in picks}
-                got: dict[int, np.ndarray] = {}
-                try:
-                    for packet in packets.run(first, last):
-                        stats.decoded += 1
-                        self._keep(stream.codec_context.decode(packet), wanted, got)
-                    self._keep(stream.codec_context.decode(None), wanted, got)
-                    stream.codec_context.flush_buffers()
-                except av.error.FFmpegError as err:
-                    raise InputError(f"{self.path}: video is damaged ({_one_line(err)})") from None
-                for i in picks:
-                    if i not in got:
-                        raise InputError(f"{self.path}: frame {i} cannot be decoded")
-                    where = f"{self.path}: frame {i}"
-                    check_equirectangular(got[i], where)
-                    stats.delivered += 1
-                    yield Frame(i, float(self.index.stamps[i]), got.pop(i))
-        finally:
-            container.close()
+            reader = self._local.reader = _PacketReader(container, stream, self.index)
+        return reader
 
-    @staticmethod
-    def _keep(frames, wanted: dict[int, int], got: dict[int, np.ndarray]) -> None:
+    def decode(self, run: tuple[int, int, list[int]]) -> _DecodedRun:
+        """Decode one run (in a worker thread): its picks as RGB, checked, in pick order."""
+        first, last, picks = run
+        packets = self._reader()
+        codec = packets.stream.codec_context
+        wanted = {int(self.index.pts[i]): i for i in picks}
+        got: dict[int, tuple[np.ndarray, int]] = {}
+        decoded, seeks_before = 0, packets.seeks
+        try:
+            for packet in packets.run(first, last):
+                decoded += 1
+                self._keep(codec.decode(packet), wanted, got)
+            self._keep(codec.decode(None), wanted, got)
+            codec.flush_buffers()
+        except av.error.FFmpegError as err:
+            raise InputError(f"{self.path}: video is damaged ({_one_line(err)})") from None
+        for i in picks:
+            if i not in got:
+                raise InputError(f"{self.path}: frame {i} cannot be decoded")
+        return _DecodedRun(first, last, [(i, got[i]) for i in picks], decoded, packets.seeks - seeks_before)
+
+    def _keep(self, frames, wanted: dict[int, int], got: dict) -> None:
+        """RGB of the wanted decoded ``frames`` (checked 2:1 at full size), shrunk past ``max_width``."""
+        max_width = self.max_width
         for frame in frames:
             i = wanted.get(frame.pts)
-            if i is not None:
-                got[i] = frame.to_ndarray(format="rgb24")
+            if i is None:
+                continue
+            w, h = int(frame.width), int(frame.height)
+            check_equirectangular_size(w, h, f"{self.path}: frame {i}")
+            if max_width and w > max_width:
+                small = frame.reformat(width=int(max_width), height=max(1, round(h * max_width / w)),
+                                       format="rgb24", interpolation="AREA")
+                got[i] = (small.to_ndarray(), w)
+            else:
+                got[i] = (frame.to_ndarray(format="rgb24"), 0)
+
+    def close(self) -> None:
+        with self._lock:
+            for container in self._opened:
+                container.close()
+            self._opened.clear()
 
 
 class _PacketReader:
     """Packets of decode positions first..last, seeking forward over what is not needed."""
 
-    def __init__(self, container, stream, index: StreamIndex, stats: SampleStats) -> None:
-        self.container, self.stream, self.stats = container, stream, stats
+    def __init__(self, container, stream, index: StreamIndex) -> None:
+        self.container, self.stream = container, stream
+        self.seeks = 0
         self.dec_pts = np.empty(len(index), dtype=np.int64)
         self.dec_pts[index.decode_pos] = index.pts
         self.pos_of = {int(p): d for d, p in enumerate(self.dec_pts)}
@@ -273,9 +366,9 @@ class _PacketReader:
         self.next_pos = 0  # decode position of the next packet self.demux yields
 
     def _restart(self, first: int) -> None:
-        """Seek to the key frame at decode position ``first`` (from the start when it is 0)."""
-        if self.demux is not None:
-            self.stats.seeks += 1
+        """Seek to the key frame at decode position ``first`` (read from the start when it is 0)."""
+        if self.demux is not None or first > 0:  # a fresh reader's first run need not be the video's
+            self.seeks += 1
             target = int(self.dec_pts[first])
             self.container.seek(target, stream=self.stream, backward=True, any_frame=False)
         self.demux = self.container.demux(self.stream)

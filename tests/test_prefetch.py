@@ -1,0 +1,50 @@
+"""Reading ahead in a thread changes nothing a reader's consumer can see: order, errors, closing."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from engine.errors import InputError
+from engine.prefetch import prefetched
+
+
+def test_items_come_in_order_and_all_of_them():
+    assert list(prefetched(iter(range(100)), depth=3)) == list(range(100))
+
+
+def test_a_readers_error_reaches_the_consumer_where_the_item_would_have_come():
+    def reader():
+        yield 1
+        yield 2
+        raise InputError("clip.mp4: frame 3 cannot be decoded")
+
+    got = []
+    with pytest.raises(InputError, match="frame 3 cannot be decoded"):
+        for item in prefetched(reader()):
+            got.append(item)
+    assert got == [1, 2]
+
+
+def test_a_consumer_that_stops_early_stops_the_thread_and_closes_the_reader():
+    closed = threading.Event()
+    read = []
+
+    def reader():
+        try:
+            for i in range(10_000):
+                read.append(i)
+                yield i
+        finally:
+            closed.set()
+
+    stream = prefetched(reader(), depth=2)
+    assert next(stream) == 0
+    stream.close()
+    assert closed.wait(2.0)
+    time.sleep(0.2)
+    assert len(read) <= 5                                        # read ahead by at most a few
+    assert not any(t.name == "panotopo-read-ahead" for t in threading.enumerate())
+
