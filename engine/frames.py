@@ -4,7 +4,9 @@ A ``FrameSource`` is a recording (video, ROS1/ROS2 bag, folder of images).
 ``index`` is always the frame's position in the whole recording (source frame),
 ``stamp`` is seconds (from the start for videos and folders, ROS time for bags).
 Sampling at ``interval`` seconds picks, for t_k = first_stamp + k * interval, the
-first frame whose stamp is >= t_k (each source frame at most once).
+first frame whose stamp is >= t_k (each source frame at most once). The PyAV video reader
+takes the nearest key frame instead when every t_k has one within max(0.25 s, interval / 4)
+(``engine.sources.video_av``); delivered stamps are always those of the delivered frame.
 """
 
 from __future__ import annotations
