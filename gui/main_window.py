@@ -45,7 +45,7 @@ from .pair_view import PairView
 from .window_layout import split_views
 from .params_panel import ParamsPanel
 from .similarity_view import SimilarityView
-from .worker import RunController, RunJob, RunResult
+from .worker import FinishedRun, RunController, RunJob
 
 APP_NAME = "panotopo"
 FOCUS_FRAME = "border: 2px solid #3daee9;"  # the frame viewer has the keyboard
@@ -79,7 +79,7 @@ class MainWindow(QMainWindow):
         self.similarity_worker = LatestOnly(self)  # the similarity matrix, off the UI thread
         self.advance_after_decision = bool(self.defaults["ui"].get("advance_after_decision", True))
         self._pending_decisions: Optional[dict] = None
-        self._preparing_run: Optional[RunResult] = None  # a finished run whose map is being prepared
+        self._preparing_run: Optional[FinishedRun] = None  # a finished run whose map is being prepared
         self._pending_view: dict = {}
         self._extra_dirty = False     # changes outside the undo stack (poses loaded)
         self._defaults: dict = {}
@@ -688,7 +688,7 @@ class MainWindow(QMainWindow):
             self.progress_bar.setRange(0, 0)
             self.progress_bar.setFormat(stage)
 
-    def _on_run_finished(self, result: RunResult) -> None:
+    def _on_run_finished(self, result: FinishedRun) -> None:
         """The run's map is prepared off the UI thread too (decisions applied, rows, layout)."""
         # Decisions survive a re-run: the current ones, or those of the session just opened.
         pending, self._pending_decisions = self._pending_decisions, None
@@ -699,12 +699,12 @@ class MainWindow(QMainWindow):
         self.remapper.submit(job, lambda prepared: self._run_prepared(result, pending, prepared),
                              lambda exc: self._run_prepare_failed(result, exc))
 
-    def _run_prepare_failed(self, result: RunResult, exc: BaseException) -> None:
+    def _run_prepare_failed(self, result: FinishedRun, exc: BaseException) -> None:
         if self._preparing_run is result:
             self._preparing_run = None
             self._on_run_failed(f"unexpected error: {exc.__class__.__name__}: {exc}")
 
-    def _run_prepared(self, result: RunResult, pending, prepared) -> None:
+    def _run_prepared(self, result: FinishedRun, pending, prepared) -> None:
         from engine.pipeline import descriptor_defaults
 
         if self._preparing_run is not result:

@@ -30,7 +30,9 @@ class RunJob:
 
 
 @dataclass
-class RunResult:
+class FinishedRun:
+    """What a finished job gives the window (``engine.run.RunResult`` narrowed to what it shows)."""
+
     job: RunJob
     descs: object                 # Descriptors
     topomap: object               # TopoMap
@@ -39,7 +41,7 @@ class RunResult:
 
 class PipelineWorker(QObject):
     progress = Signal(int, int, str)
-    finished = Signal(object)     # RunResult
+    finished = Signal(object)     # FinishedRun
     failed = Signal(str)
     cancelled = Signal()
 
@@ -65,7 +67,7 @@ class PipelineWorker(QObject):
             traceback.print_exc(file=sys.stderr)
             self.failed.emit(f"unexpected error: {exc.__class__.__name__}: {exc}")
         else:
-            self.finished.emit(RunResult(self.job, descs, topomap, time.monotonic() - t0))
+            self.finished.emit(FinishedRun(self.job, descs, topomap, time.monotonic() - t0))
 
     def _progress(self, done: int, total: int, stage: str) -> None:
         self.progress.emit(int(done), int(total), str(stage))
@@ -141,7 +143,7 @@ class RunController(QObject):
         return self._worker is None or self.sender() is not self._worker
 
     @Slot(object)
-    def _on_finished(self, result: RunResult) -> None:
+    def _on_finished(self, result: FinishedRun) -> None:
         if self._stale():
             return
         cancelled = self._cancel is not None and self._cancel.is_set()
