@@ -31,8 +31,8 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 9. ``closure``      the path itself must come back: dead reckoning of the path between a
                     loop's ends (headings and directions of motion from the two-view
                     geometry of consecutive nodes, one unit per node step) must meet again,
-                    or the loop joins two look-alike places far apart and goes back to the
-                    candidate tier.
+                    or the loop joins two look-alike places far apart: an automatic loop
+                    goes back to the candidate tier, a candidate is dropped.
 
 Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
 so re-mapping after a threshold change costs the arithmetic of the stages, not the retrieval
@@ -381,16 +381,22 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
 
 
 def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
-    """Stage 9: demote automatic loops whose path does not come back.
+    """Stage 9: the path must come back: demote automatic loops whose path does not, and
+    drop candidates whose path does not.
 
     A loop (a, b) says the path from a to b ends where it started; dead reckoning
     (``path_track``) says how far apart its ends are, ``c.closure`` node steps (NaN where
-    unknown: nothing is demoted). More than ``closure_slack + closure_rate * (b - a)`` steps
+    unknown: nothing changes). More than ``closure_slack + closure_rate * (b - a)`` steps
     and the loop joins two places that only look alike (a copied facade 80 m down the same
-    street) and goes back to "candidate": appearance and geometry cannot tell an exact copy
-    from a revisit, the path can."""
+    street): appearance and geometry cannot tell an exact copy from a revisit, the path can.
+    An automatic loop there goes back to "candidate" (strong evidence against the path: a
+    person decides); a candidate there is dropped (weak evidence and the path against it:
+    nothing to review). On the first synthetic family (seeds 0-4) no candidate within 1 m
+    of its place missed by more than 0.83 of the tolerance, and 116 of the 273 wrong ones
+    missed by more than all of it; on the second family (seeds 1-8) 0.85 and 717 of 1,045."""
     out = status.copy()
     far = c.closure > params.closure_slack + params.closure_rate * (c.b - c.a)   # NaN: False
+    out[(status == "candidate") & far] = ""
     out[(status == "auto") & far] = "candidate"
     return out
 

@@ -20,8 +20,8 @@ def routes():
     return {r: described_route(r) for r in ("lookalike", "reverse")}
 
 
-def _loops_with_distance(descs: Descriptors, route: str):
-    topomap = build_map(descs, MapParams(neighbor_node_num=NN))
+def _loops_with_distance(descs: Descriptors, route: str, **params):
+    topomap = build_map(descs, MapParams(neighbor_node_num=NN, **params))
     stamp = {n: d["stamp"] for n, d in topomap.graph.nodes(data=True)}
     poses = synth2.poses_for(route, 0)
     out = []
@@ -32,11 +32,15 @@ def _loops_with_distance(descs: Descriptors, route: str):
 
 
 def test_twin_facades_far_down_one_street_are_seen_but_never_an_automatic_loop(routes):
+    # Without the path's word (stage 9 off) the copied building is a loop or a candidate:
+    # appearance and geometry alone take it for the same place (the test means something) ...
+    unchecked = _loops_with_distance(routes["lookalike"], "lookalike", closure_slack=1e6)
+    assert any(dist > 50.0 for status, dist in unchecked)
+    # ... with it, no loop the exported map would hold joins two places, and what still
+    # joins the twins is left to a person.
     loops = _loops_with_distance(routes["lookalike"], "lookalike")
-    # The copied building was seen as alike (the test means something) ...
-    assert any(status == "candidate" and dist > 50.0 for status, dist in loops)
-    # ... and no loop the exported map would hold joins two places.
     assert not [dist for status, dist in loops if status == "auto" and dist > 1.0]
+    assert all(status == "candidate" for status, dist in loops if dist > 50.0)
 
 
 def test_a_reverse_drive_back_along_the_street_is_closed_automatically(routes):

@@ -99,3 +99,18 @@ def test_a_loop_whose_path_runs_away_goes_back_to_the_candidates_and_one_that_re
     # two places that look alike, whatever the views say.
     street = np.stack([np.arange(200.0), np.zeros(200)], axis=1)
     assert judged(street, 20, 180) == ["candidate"]
+
+
+def test_a_candidate_whose_path_runs_away_is_not_put_to_a_person_and_one_that_returns_is():
+    from engine.loop_closure import closure
+
+    street = np.stack([np.arange(200.0), np.zeros(200)], axis=1)          # straight out
+    out_and_back = np.stack([60.0 - np.abs(60.0 - np.arange(121.0)), np.zeros(121)], axis=1)
+    for track, (a, b), kept in ((street, (20, 180), []), (out_and_back, (0, 120), ["candidate"])):
+        c = matches(a=[a], b=[b], score=[P.candidate_z])
+        c.closure = np.linalg.norm(track[c.b] - track[c.a], axis=1)
+        assert [s for s in closure(c, np.array(["candidate"], dtype=object), P).tolist() if s] == kept
+    # Where the path is unknown (no geometry), nothing is dropped.
+    c = matches(a=[20], b=[180], score=[P.candidate_z])
+    c.closure = np.array([np.nan])
+    assert closure(c, np.array(["candidate"], dtype=object), P).tolist() == ["candidate"]
