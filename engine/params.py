@@ -107,12 +107,13 @@ PARAMETERS: tuple[Parameter, ...] = (
               "degrees a cycle of path and two loops may miss closing (plus drift along the path)",
               "chosen on the first synthetic family", 0.0, 180.0),
     Parameter("closure_slack", float, 2.0, _NEW,
-              "node steps the dead-reckoned path between an automatic loop's ends may miss "
-              "meeting, plus closure_rate per step along it",
+              "node steps the dead-reckoned path between a loop's ends may miss meeting, plus "
+              "closure_rate per step along it (beyond: an automatic loop goes back to the "
+              "queue, a candidate is dropped)",
               "chosen on the first synthetic family (seeds 0-4): the two visits of a place "
               "on a short return miss by 2 steps at most", 0.0, 1e6),
     Parameter("closure_rate", float, 0.6, _NEW,
-              "share of the path length between an automatic loop's ends that dead reckoning "
+              "share of the path length between a loop's ends that dead reckoning "
               "may miss meeting (heading and step-length drift)",
               "chosen on the first synthetic family (seeds 0-4): true loops miss by up to 0.53 "
               "of the path (one wrong turn indoors); a corridor repeating 9 steps later misses "
