@@ -70,6 +70,7 @@ class Matches:
     step_inliers: np.ndarray = None  # int64 inliers of each end with its next node (smaller end; -1 unknown)
     confidence: np.ndarray = None
     closure: np.ndarray = None    # float64 node steps dead reckoning misses meeting by (stage 9; NaN unknown)
+    plane_share: np.ndarray = None  # float64 share of inliers on one plane (stage 5; NaN unknown)
 
     def __len__(self) -> int:
         return int(self.a.size)
@@ -170,9 +171,9 @@ def one_per_place(c: Matches, radius: int) -> np.ndarray:
 
 
 def _verified(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cache: dict):
-    """(matches, inliers, inlier_ratio, yaw, motion azimuth; both of the shifted frames, see
-    ``engine.sphere``) of node pairs, from the
-    per-frame-pair cache, verifying only the pairs not seen before."""
+    """(matches, inliers, inlier_ratio, yaw, motion azimuth, plane share; both of the shifted
+    frames, see ``engine.sphere``) of node pairs, from the per-frame-pair cache, verifying
+    only the pairs not seen before."""
     from . import sphere
 
     store = cache.setdefault("geometry", {})
@@ -183,10 +184,10 @@ def _verified(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cac
         arr = np.asarray(todo, np.int64)
         res = sphere.verify_pairs(features, arr[:, 0], arr[:, 1])
         for j, k in enumerate(todo):
-            store[k] = (int(res["matches"][j]), int(res["inliers"][j]),
-                        float(res["inlier_ratio"][j]), float(res["yaw_deg"][j]), float(res["motion_deg"][j]))
+            store[k] = (int(res["matches"][j]), int(res["inliers"][j]), float(res["inlier_ratio"][j]),
+                        float(res["yaw_deg"][j]), float(res["motion_deg"][j]), float(res["plane_share"][j]))
     if not keys:
-        return np.zeros((0, 5))
+        return np.zeros((0, 6))
     return np.asarray([store[k] for k in keys], np.float64)
 
 
@@ -196,17 +197,20 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
 
     Returns arrays ``matches``, ``inliers`` (-1 where there are no features), ``inlier_ratio``,
     ``yaw`` (degrees, shifted frames; NaN where no model), ``path_inliers`` (the larger
-    count of the two ends with their path neighbours, before or after) and ``step_inliers``
-    (each end's count with its nearer-sharing next node, before or after; the smaller end's)."""
+    count of the two ends with their path neighbours, before or after), ``step_inliers``
+    (each end's count with its nearer-sharing next node, before or after; the smaller end's)
+    and ``plane_share`` (share of the pair's inliers on one plane, ``engine.sphere.plane_share``;
+    NaN without an essential model)."""
     n = a.size
     out = {"matches": np.full(n, -1, np.int64), "inliers": np.full(n, -1, np.int64),
            "inlier_ratio": np.full(n, np.nan), "yaw": np.full(n, np.nan),
-           "path_inliers": np.full(n, -1, np.int64), "step_inliers": np.full(n, -1, np.int64)}
+           "path_inliers": np.full(n, -1, np.int64), "step_inliers": np.full(n, -1, np.int64),
+           "plane_share": np.full(n, np.nan)}
     if features is None or n == 0:
         return out
     pair = _verified(features, node_rows, a, b, cache)
     out["matches"], out["inliers"] = pair[:, 0].astype(np.int64), pair[:, 1].astype(np.int64)
-    out["inlier_ratio"], out["yaw"] = pair[:, 2], pair[:, 3]
+    out["inlier_ratio"], out["yaw"], out["plane_share"] = pair[:, 2], pair[:, 3], pair[:, 5]
     out["path_inliers"] = np.maximum(_neighbour_inliers(features, node_rows, a, gap, cache),
                                      _neighbour_inliers(features, node_rows, b, gap, cache))
     out["step_inliers"] = np.minimum(_neighbour_inliers(features, node_rows, a, 1, cache),
@@ -251,7 +255,10 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     node step: the physical reference comes from the recording itself (texture, camera,
     node spacing), not from a number tuned on one world. On the first synthetic family
     the true revisits share 0.8-2.6 times a step's inliers, views 1-3 m apart 0.5-0.9 times
-    (5th-95th percentiles of the matches kept by stage 4).
+    (5th-95th percentiles of the matches kept by stage 4). Nor may more than
+    ``auto_plane_share`` of the inliers lie on one plane: a flat picture copied elsewhere (a
+    poster, a printed facade, a repeated wall texture) fits two views as well as the place
+    does; a revisit sees things at several depths.
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
@@ -260,7 +267,10 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     unrelated scores is about 4), but then nothing along the stretch or in the geometry
     agrees with it."""
     step = np.maximum(c.step_inliers if c.step_inliers is not None else np.zeros(len(c), np.int64), 0)
-    geo_strong = (c.inliers >= params.auto_inliers) & (c.inliers >= params.auto_step_share * step)
+    plane = c.plane_share if c.plane_share is not None else np.full(len(c), np.nan)
+    geo_strong = ((c.inliers >= params.auto_inliers) & (c.inliers >= params.auto_step_share * step)
+                  & ~(plane > params.auto_plane_share))                          # NaN: not flat
+
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
     auto = ((geo_strong & (c.score >= params.auto_geometry_z))
@@ -430,7 +440,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     c = c.take(one_per_place(c, params.place_radius))                  # 4
     geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache)   # 5
     c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
-    c.path_inliers, c.step_inliers = geo["path_inliers"], geo["step_inliers"]
+    c.path_inliers, c.step_inliers, c.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
     c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
     if columns is not None and len(c):
         c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
@@ -459,4 +469,6 @@ def _evidence(c: Matches, i: int) -> dict:
             "path_inliers": int(c.path_inliers[i]) if known else None,
             "step_inliers": int(c.step_inliers[i]) if known else None,
             "confidence": float(c.confidence[i]),
-            "closure": float(c.closure[i]) if np.isfinite(c.closure[i]) else None}
+            "closure": float(c.closure[i]) if np.isfinite(c.closure[i]) else None,
+            "plane_share": (float(c.plane_share[i]) if c.plane_share is not None and np.isfinite(c.plane_share[i])
+                            else None)}

@@ -408,14 +408,16 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
 
     Returns arrays of len(a): ``inliers``, ``matches`` (int64), ``inlier_ratio`` (float32),
     ``yaw_deg`` (float64, of the frames as stored: add the shifts back with
-    ``yaw_of_originals``; NaN for model 'none'), ``model`` (int8, ``MODEL_CODES``) and
-    ``motion_deg`` (``motion_azimuth`` of the essential model; NaN for the other models).
+    ``yaw_of_originals``; NaN for model 'none'), ``model`` (int8, ``MODEL_CODES``),
+    ``motion_deg`` (``motion_azimuth`` of the essential model; NaN for the other models) and
+    ``plane_share`` (``plane_share`` of the essential model's inliers; NaN otherwise).
     """
     a, b = np.asarray(a, np.int64).ravel(), np.asarray(b, np.int64).ravel()
     n = a.size
     out = {"inliers": np.zeros(n, np.int64), "matches": np.zeros(n, np.int64),
            "inlier_ratio": np.zeros(n, np.float32), "yaw_deg": np.full(n, np.nan),
-           "model": np.zeros(n, np.int8), "motion_deg": np.full(n, np.nan)}
+           "model": np.zeros(n, np.int8), "motion_deg": np.full(n, np.nan),
+           "plane_share": np.full(n, np.nan)}
     cache: dict[int, LocalFeatures] = {}
 
     def feats(i: int) -> LocalFeatures:
@@ -432,7 +434,57 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
             out["yaw_deg"][k] = tv.yaw_deg
         if tv.model == "essential" and tv.translation is not None:
             out["motion_deg"][k] = motion_azimuth(tv.rotation, tv.translation)
+            m = tv.inlier_mask
+            out["plane_share"][k] = plane_share(tv.rotation, tv.translation,
+                                                bearings(tv.uv_a[m]), bearings(tv.uv_b[m]), seed)
     return out
+
+
+# Plane share: inliers are triangulated with the essential model (midpoint of the two rays);
+# rays nearly parallel (less than PARALLAX_MIN radians apart, 0.6 degree: under one pixel of
+# the image SIFT works on) give no depth and are left out. A point is on a plane when it lies
+# within PLANE_TOL of its own distance from it (depth from one-pixel parallax is that
+# uncertain at a few metres); planes are drawn from PLANE_DRAWS random triples (the dominant
+# plane of 400 points holding 30 % of them is missed by all 200 with probability 0.4 %).
+PARALLAX_MIN = 0.01
+PLANE_TOL = 0.05
+PLANE_DRAWS = 200
+PLANE_MIN_POINTS = 12
+
+
+def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed: int = 0) -> float:
+    """Share of matched bearings (a in view a, b in view b, unit (n, 3)) whose triangulated
+    points lie on the one plane that holds the most of them, for ``X_b = R X_a + t``.
+
+    Two views of a revisited place see things at several depths (walls on both sides, the
+    floor, objects); two views of a flat picture copied elsewhere (a poster, a facade print,
+    a repeated wall texture) see one plane, and a plane explains any two views of it with a
+    relative pose of its own, so the geometry alone cannot tell that copy from the place.
+    NaN where fewer than ``PLANE_MIN_POINTS`` points have a depth."""
+    r, t = np.asarray(r, np.float64), np.asarray(t, np.float64).ravel()
+    p, q = np.asarray(a, np.float64) @ r.T, np.asarray(b, np.float64)   # rays of a in b's frame
+    pq = np.einsum("ij,ij->i", p, q)
+    det = 1.0 - pq * pq
+    ok = det > PARALLAX_MIN ** 2
+    # s p - u q = -t in least squares (p, q unit): s = (-p.t + (p.q)(q.t)) / det
+    s = (-(p @ t) + pq * (q @ t)) / np.where(ok, det, 1.0)
+    ok &= s > 0
+    x = s[ok, None] * np.asarray(a, np.float64)[ok]                  # points in a's frame
+    n = x.shape[0]
+    if n < PLANE_MIN_POINTS:
+        return float("nan")
+    rng = np.random.default_rng(seed)
+    tri = np.stack([rng.choice(n, 3, replace=False) for _ in range(PLANE_DRAWS)])
+    normal = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+    length = np.linalg.norm(normal, axis=1)
+    good = length > 1e-12
+    if not good.any():
+        return float("nan")
+    normal = normal[good] / length[good, None]
+    offset = np.einsum("ij,ij->i", normal, x[tri[good, 0]])
+    dist = np.abs(x @ normal.T - offset[None, :])                      # (n, planes)
+    on = dist <= PLANE_TOL * np.linalg.norm(x, axis=1)[:, None]
+    return float(on.sum(axis=0).max() / n)
 
 
 def motion_azimuth(r: np.ndarray, t: np.ndarray) -> float:

@@ -96,7 +96,8 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
 
     From the loop arc's evidence attributes (``engine.graph.EVIDENCE_KEYS``: ``score`` and
     ``support`` in standard deviations above the recording's background, ``matches``,
-    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``closure``, ``direction``, ``confidence``);
+    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``closure``, ``plane_share``, ``direction``,
+    ``confidence``);
     the feature counts of
     ``matches`` (computed for the view) take the place of the arc's when given.
     """
@@ -122,6 +123,8 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
         out.append(f"one step along the path shares {int(num('step_inliers'))}")
     if num("closure") is not None:
         out.append(f"the path meets itself again within {num('closure'):.1f} node steps")
+    if num("plane_share") is not None:
+        out.append(f"{100 * num('plane_share'):.0f} % of the inliers on one plane")
     if num("support") is not None:
         out.append(f"sequence support {num('support'):.1f} σ")
     elif num("window_count"):

@@ -42,6 +42,16 @@ def test_two_views_sharing_less_than_one_node_step_are_not_an_automatic_loop():
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
+def test_views_whose_inliers_lie_on_one_plane_are_left_to_a_person():
+    # A flat picture copied elsewhere (a poster, a repeated wall texture) fits two views as
+    # well as a revisit does; the revisit sees things at several depths.
+    strong = P.auto_inliers * 3
+    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[P.candidate_z + 1] * 3, inliers=[strong] * 3,
+                ratio=[0.8] * 3, step=[strong // 2] * 3, confidence=[P.candidate_confidence + 10] * 3)
+    c.plane_share = np.array([0.3, min(1.0, P.auto_plane_share + 0.2), np.nan])   # NaN: a pure rotation
+    assert tiers(c, P).tolist() == ["auto", "candidate", "auto"]
+
+
 def test_without_geometry_only_score_and_support_together_make_an_automatic_loop():
     c = matches(a=[0, 0, 0], b=[20, 40, 60], score=[P.auto_z + 1, P.auto_z + 1, P.candidate_z + 0.1],
                 support=[P.auto_support + 1, 0.0, P.auto_support + 1], confidence=[20, 20, 20])

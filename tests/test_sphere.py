@@ -6,7 +6,7 @@ import pytest
 
 from engine.features import FeatureTable, LocalFeatures, extract
 from engine.shift import apply_shift, canonical_shift, relative_yaw
-from engine.sphere import (MODEL_CODES, bearings, to_uv, two_view, verify_pairs, yaw_of_originals,
+from engine.sphere import (MODEL_CODES, bearings, plane_share, to_uv, two_view, verify_pairs, yaw_of_originals,
                            yaw_of_rotation)
 
 DATA = Path(__file__).parent / "data"
@@ -143,8 +143,32 @@ def test_verify_pairs_gives_one_row_per_pair(pano):
     table = FeatureTable.from_list([extract(pano), extract(rolled), extract(np.roll(pano[::-1], 50, axis=1)),
                                     LocalFeatures(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.uint8))])
     out = verify_pairs(table, np.array([0, 0, 0]), np.array([1, 2, 3]))
-    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model", "motion_deg"}
+    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model", "motion_deg", "plane_share"}
     assert all(v.shape == (3,) for v in out.values())
     assert out["model"][0] == MODEL_CODES["rotation"] and out["inliers"][0] > 5 * out["inliers"][1]
     assert abs(_wrap(out["yaw_deg"][0] - relative_yaw(pano, rolled)[0])) < 2.0
     assert out["model"][2] == MODEL_CODES["none"] and np.isnan(out["yaw_deg"][2]) and out["matches"][2] == 0
+
+
+def _two_views(points: np.ndarray, r: np.ndarray, t: np.ndarray):
+    xb = points @ r.T + t
+    return (points / np.linalg.norm(points, axis=1, keepdims=True),
+            xb / np.linalg.norm(xb, axis=1, keepdims=True))
+
+
+def test_a_flat_picture_is_all_on_one_plane_and_a_corridor_is_not():
+    rng = np.random.default_rng(3)
+    c, s_ = np.cos(0.3), np.sin(0.3)
+    r = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    t = np.array([0.6, 0.2, 0.05])
+    n = 200
+    along = rng.uniform(-6, 6, n)
+    poster = np.c_[along, np.full(n, 2.0), rng.uniform(-0.5, 1.0, n)]             # one wall
+    corridor = np.r_[poster[: n // 3],
+                     np.c_[along[: n // 3], np.full(n // 3, -1.5), rng.uniform(-0.5, 1.0, n // 3)],  # other wall
+                     np.c_[along[: n // 3], rng.uniform(-1.5, 2.0, n // 3), np.full(n // 3, -1.2)],  # floor
+                     rng.uniform([-6, -1.4, -1.1], [6, 1.9, 1.0], (n // 4, 3))]                       # things
+    assert plane_share(r, t, *_two_views(poster, r, t)) > 0.95
+    assert plane_share(r, t, *_two_views(corridor, r, t)) < 0.5
+    # Seen from one spot (no parallax) there is no depth, hence nothing to say.
+    assert np.isnan(plane_share(r, np.zeros(3), *_two_views(corridor, r, np.zeros(3))))
