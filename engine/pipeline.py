@@ -93,8 +93,11 @@ def describe_source(source: FrameSource, settings: DescribeSettings, model, wher
     skipped: list[int] = []
     frames = prefetched(checked_frames(source, settings.interval, settings.skip_bad_frames, skipped,
                                        max_width=work_width(model)))
-    result = describe_frames(frames, expected, settings, model=model, source=where,
-                             progress=progress, cancel=cancel)
+    try:
+        result = describe_frames(frames, expected, settings, model=model, source=where,
+                                 progress=progress, cancel=cancel)
+    finally:
+        frames.close()   # on cancel or error too: reading stops before the caller closes the source
     result.meta["skipped_frames"] = skipped
     return result
 

@@ -48,3 +48,28 @@ def test_a_consumer_that_stops_early_stops_the_thread_and_closes_the_reader():
     assert len(read) <= 5                                        # read ahead by at most a few
     assert not any(t.name == "panotopo-read-ahead" for t in threading.enumerate())
 
+
+
+def test_cancelling_a_video_describe_stops_reading_before_the_call_returns(tmp_path):
+    import numpy as np
+
+    from engine.errors import Cancelled
+    from engine.pipeline import DescribeSettings, describe
+    from engine.synth.writers import write_video
+
+    rng = np.random.default_rng(0)
+    frames = [np.ascontiguousarray(np.roll(rng.integers(0, 255, (64, 128, 3), np.uint8), 4 * i, axis=1))
+              for i in range(60)]
+    clip = write_video(tmp_path / "walk.mp4", frames, fps=10)
+    stop = threading.Event()
+
+    def progress(done, total, stage):
+        if done >= 2:
+            stop.set()
+
+    with pytest.raises(Cancelled) as caught:
+        describe(clip, DescribeSettings(interval=0.1, options={"input_height": 32}), progress=progress, cancel=stop)
+    # The error is still held (its traceback keeps describe's frames alive, as a log would):
+    # the threads must have stopped anyway, before describe returned.
+    alive = [t.name for t in threading.enumerate() if t.name.startswith(("panotopo-read-ahead", "panotopo-decode"))]
+    assert not alive and caught.value.__traceback__ is not None
