@@ -473,9 +473,8 @@ def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed
     n = x.shape[0]
     if n < PLANE_MIN_POINTS:
         return float("nan")
-    rng = np.random.default_rng(seed)
-    tri = np.stack([rng.choice(n, 3, replace=False) for _ in range(PLANE_DRAWS)])
-    normal = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])
+    tri = np.random.default_rng(seed).integers(0, n, size=(PLANE_DRAWS, 3))   # a repeated point
+    normal = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])   # gives no plane
     length = np.linalg.norm(normal, axis=1)
     good = length > 1e-12
     if not good.any():
