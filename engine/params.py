@@ -103,11 +103,11 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",
-              "first synthetic family (seeds 0-4): true automatic loops 0.12-0.37, none "
+              "first synthetic family (seeds 0-4): true automatic loops 0.16-0.42, none "
               "wrong; two walls of a corridor with equal features give 0.5. Chosen after the "
-              "second family's seeds 9-10 showed a wrong loop at 0.77 (one wall texture 21 m "
-              "further on) and true ones up to 0.51; seeds 13-14 were rendered before the "
-              "choice and mapped once after it", 0.0, 1.0),
+              "second family's seeds 9-10 showed a wrong loop at 0.81 (one wall texture 21 m "
+              "further on) and true ones up to 0.53; seeds 13-14 were rendered before the "
+              "choice and mapped once after it (benchmarks/results/loop_evidence.md)", 0.0, 1.0),
     Parameter("place_radius", int, 4, _NEW,
               "one loop per place: a loop must be the most confident within this many nodes "
               "on both ends", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
