@@ -302,3 +302,24 @@ def test_poses_from_bag_topic(tmp_path, frames, kind, pose_type):
         assert np.allclose(got.yaw, poses.yaw, atol=1e-9)
     # the image topic of the same bag is still found on its own
     assert open_recording(path).frame_count == 4
+
+
+def test_a_photo_folder_asked_for_narrower_frames_decodes_them_smaller(tmp_path):
+    # A real photo (JPEG, as cameras write), decoded at a fraction of its size in libjpeg.
+    pano = cv2.imread(str(Path(__file__).parent / "data" / "examplepano_1024.jpg"))
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"p{i}.jpg"), np.roll(pano, 100 * i, axis=1))
+    src = FolderSource(tmp_path)
+    small = list(src.frames(1.0, max_width=256))
+    full = list(src.frames(1.0))
+    assert [f.index for f in small] == [f.index for f in full]
+    for s, f in zip(small, full):
+        assert s.rgb.shape == (128, 256, 3) and s.source_width == 1024 and s.width == 1024
+        shrunk = cv2.resize(f.rgb, (256, 128), interpolation=cv2.INTER_AREA)
+        assert mean_abs_error(s.rgb, shrunk) < 6                 # the same picture, smaller
+    # A frame of another size is still refused in one line, from its header.
+    cv2.imwrite(str(tmp_path / "p3.jpg"), cv2.resize(pano, (512, 256)))
+    from engine.errors import InputError
+
+    with pytest.raises(InputError, match="image is 512x256, the folder's first image is 1024x512"):
+        list(FolderSource(tmp_path).frames(1.0, max_width=256))

@@ -42,13 +42,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Iterator, Optional
 
 import cv2
 import numpy as np
 
 from ..errors import InputError
-from ..frames import Frame, IndexedSource, check_equirectangular
+from ..frames import Frame, IndexedSource, check_equirectangular, check_equirectangular_size
 from ..poses import Poses
 from ..validate import frame_size, image_file_size
 from .exif import PhotoTags, read_photo_tags
@@ -191,6 +191,37 @@ class FolderSource(IndexedSource):
         rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         check_equirectangular(rgb, str(file))
         return rgb
+
+    def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
+        """Sampled frames; with ``max_width``, each image is decoded at 1/2, 1/4 or 1/8 of its
+        size where that is still at least ``max_width`` wide (libjpeg scales in the DCT while
+        decoding: a 5760x2880 GoPro MAX JPEG took 112 ms in full and 37 ms at a quarter),
+        with its header size checked as the full frame is (``Frame.source_width`` set)."""
+        if not max_width:
+            yield from super().frames(interval)
+            return
+        for index in self.sample_indices(interval):
+            yield self._reduced(int(index), int(max_width))
+
+    def _reduced(self, index: int, max_width: int) -> Frame:
+        file = self.files[index]
+        size = image_file_size(file)
+        factor = 1
+        if size is not None:
+            frame_size(*size, str(file))
+            check_equirectangular_size(size[0], size[1], str(file))
+            if size != self._resolution:
+                w, h = self._resolution
+                raise InputError(f"{file}: image is {size[0]}x{size[1]}, the folder's first image is {w}x{h}")
+            while factor < 8 and size[0] // (2 * factor) >= max_width:
+                factor *= 2
+        if factor == 1:
+            return self.frame_at(index)
+        flag = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}[factor]
+        bgr = cv2.imread(str(file), flag)
+        if bgr is None:
+            raise InputError(f"{file}: unreadable or corrupt image")
+        return Frame(index, float(self._stamps[index]), cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), size[0])
 
     def frame_at(self, index: int) -> Frame:
         if not 0 <= index < len(self.files):
