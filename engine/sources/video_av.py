@@ -242,8 +242,7 @@ class AvSampler:
         pending: deque = deque()
         pool = ThreadPoolExecutor(max_workers=DECODE_THREADS, thread_name_prefix="panotopo-decode")
         try:
-            runs = iter(self._runs(plan.indices))
-            for run in runs:
+            for run in self._runs(plan.indices):
                 pending.append(pool.submit(decoders.decode, run))
                 if len(pending) < RUNS_AHEAD:
                     continue
@@ -268,7 +267,7 @@ class AvSampler:
 # Threads that decode runs at once. A run after a seek starts at a key frame, and FFmpeg
 # decodes one H.264/HEVC key frame on one thread (frame threads need a sequence of frames,
 # camera streams have one slice per frame), so at 1 Hz on key frames one thread was the
-# bottleneck: 34 ms (ultrafast) to 60 ms (veryfast) per 3840x1920 key frame against ~35 ms
+# bottleneck: 28-34 ms (ultrafast) to 55 ms (veryfast) per 3840x1920 key frame against ~35 ms
 # of describing per sample (benchmarks/bench_video_sampling.py). Two threads use both cores
 # of the machine this was measured on; more would only queue behind the descriptor.
 DECODE_THREADS = 2
