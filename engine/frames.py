@@ -112,8 +112,8 @@ class FrameSource(ABC):
         """Frames sampled every ``interval`` seconds, in order.
 
         ``max_width``: the caller will shrink frames to this many columns anyway; a reader
-        that can deliver them shrunk more cheaply than at full size does (area averaging,
-        ``Frame.source_width`` set), the others ignore it.
+        that can deliver them smaller more cheaply than at full size does (no narrower than
+        ``max_width``, ``Frame.source_width`` set), the others ignore it.
         """
         for i in self.sample_indices(interval):
             yield self.frame_at(int(i))

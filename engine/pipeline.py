@@ -193,7 +193,7 @@ WORK_WIDTH = 1024
 
 def work_width(model) -> int:
     """Columns of the working copy for ``model``: ``WORK_WIDTH``, or its network input if wider."""
-    return max(WORK_WIDTH, int(model.input_columns()) if model is not None else 0)
+    return max(WORK_WIDTH, int(model.input_columns()))
 
 
 def working_copy(rgb: np.ndarray, width: int = WORK_WIDTH) -> np.ndarray:

@@ -208,11 +208,9 @@ class FolderSource(IndexedSource):
         size = image_file_size(file)
         factor = 1
         if size is not None:
-            frame_size(*size, str(file))
+            frame_size(*size, str(file))   # the limits first, as _read does
             check_equirectangular_size(size[0], size[1], str(file))
-            if size != self._resolution:
-                w, h = self._resolution
-                raise InputError(f"{file}: image is {size[0]}x{size[1]}, the folder's first image is {w}x{h}")
+            self._check_same_size(file, size)
             while factor < 8 and size[0] // (2 * factor) >= max_width:
                 factor *= 2
         if factor == 1:
@@ -227,8 +225,10 @@ class FolderSource(IndexedSource):
         if not 0 <= index < len(self.files):
             raise IndexError(f"frame {index} outside 0..{len(self.files) - 1}")
         rgb = self._read(index)
-        if (rgb.shape[1], rgb.shape[0]) != self._resolution:
-            w, h = self._resolution
-            raise InputError(f"{self.files[index]}: image is {rgb.shape[1]}x{rgb.shape[0]}, "
-                             f"the folder's first image is {w}x{h}")
+        self._check_same_size(self.files[index], (rgb.shape[1], rgb.shape[0]))
         return Frame(index, float(self._stamps[index]), rgb)
+
+    def _check_same_size(self, file: Path, size: tuple[int, int]) -> None:
+        if tuple(size) != self._resolution:
+            w, h = self._resolution
+            raise InputError(f"{file}: image is {size[0]}x{size[1]}, the folder's first image is {w}x{h}")

@@ -290,6 +290,7 @@ class _Decoders:
 
     def __init__(self, path: Path, index: StreamIndex, max_width: Optional[int]) -> None:
         self.path, self.index, self.max_width = path, index, max_width
+        self.order = _DecodeOrder(index)   # read-only, shared by the threads' packet readers
         self._local = threading.local()
         self._opened: list = []
         self._lock = threading.Lock()
@@ -305,7 +306,7 @@ class _Decoders:
                 self._opened.append(container)
             stream = container.streams.video[0]
             stream.codec_context.thread_type = "AUTO"
-            reader = self._local.reader = _PacketReader(container, stream, self.index)
+            reader = self._local.reader = _PacketReader(container, stream, self.order)
         return reader
 
     def decode(self, run: tuple[int, int, list[int]]) -> _DecodedRun:
@@ -352,15 +353,22 @@ class _Decoders:
             self._opened.clear()
 
 
-class _PacketReader:
-    """Packets of decode positions first..last, seeking forward over what is not needed."""
+class _DecodeOrder:
+    """The index in decode order: each decode position's pts and each pts's decode position."""
 
-    def __init__(self, container, stream, index: StreamIndex) -> None:
-        self.container, self.stream = container, stream
-        self.seeks = 0
+    def __init__(self, index: StreamIndex) -> None:
         self.dec_pts = np.empty(len(index), dtype=np.int64)
         self.dec_pts[index.decode_pos] = index.pts
         self.pos_of = {int(p): d for d, p in enumerate(self.dec_pts)}
+
+
+class _PacketReader:
+    """Packets of decode positions first..last, seeking forward over what is not needed."""
+
+    def __init__(self, container, stream, order: _DecodeOrder) -> None:
+        self.container, self.stream = container, stream
+        self.seeks = 0
+        self.dec_pts, self.pos_of = order.dec_pts, order.pos_of
         self.demux = None
         self.next_pos = 0  # decode position of the next packet self.demux yields
 
