@@ -218,6 +218,16 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
     return out
 
 
+def _step_geometry(features, node_rows: np.ndarray, cache: dict) -> np.ndarray:
+    """``_verified`` of every consecutive node pair (i, i + 1), gathered once per node set:
+    the path's headings (stage 8) and its dead reckoning (stage 9) both read it."""
+    key = ("steps", hash(node_rows.tobytes()), node_rows.size)
+    if key not in cache:
+        steps = np.arange(node_rows.size - 1)
+        cache[key] = _verified(features, node_rows, steps, steps + 1, cache)
+    return cache[key]
+
+
 def _neighbour_inliers(features, node_rows: np.ndarray, ends: np.ndarray, gap: int, cache: dict) -> np.ndarray:
     """Inliers of each node in ``ends`` with the node ``gap`` before or after it on the path,
     whichever shares more (0 where neither exists)."""
@@ -297,7 +307,7 @@ def path_headings(features, columns, node_rows: np.ndarray, shifts: np.ndarray, 
     steps = np.arange(m - 1)
     yaw = np.full(m - 1, np.nan)
     if features is not None:
-        yaw = _verified(features, node_rows, steps, steps + 1, cache)[:, 3]
+        yaw = _step_geometry(features, node_rows, cache)[:, 3]
         yaw = original_yaw(yaw, shifts[steps], shifts[steps + 1], frame_width)
     if columns is not None and not np.isfinite(yaw).all():
         yaw = np.where(np.isfinite(yaw), yaw, column_yaw(columns, steps, steps + 1, shifts, frame_width))
@@ -377,7 +387,7 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
-    motion = _verified(features, node_rows, steps, steps + 1, cache)[:, 4]
+    motion = _step_geometry(features, node_rows, cache)[:, 4]
     if frame_width > 0:   # azimuths of the shifted frames to the original ones
         motion = motion - shifts[steps] * 360.0 / frame_width
     known = np.isfinite(motion)
