@@ -24,7 +24,8 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
   same with the next node along the path, the smaller of the two ends), ``confidence`` float (the
   ranking of the review queue), ``closure`` float (node steps by which the dead-reckoned
   path between the two ends misses meeting again), ``plane_share`` float (share of the
-  inliers whose triangulated points lie on one plane).
+  inliers whose triangulated points lie on one plane), ``distance_steps`` float (how far
+  apart the two views are, in node steps, from the geometry scaled by each end's own steps).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -57,9 +58,9 @@ _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
                "path_inliers": int, "confidence": float, "closure": float, "step_inliers": int,
-               "plane_share": float}
+               "plane_share": float, "distance_steps": float}
 EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
-                 "step_inliers", "confidence", "closure", "plane_share")
+                 "step_inliers", "confidence", "closure", "plane_share", "distance_steps")
 # Graph attributes: every map parameter with its declared type (bools stored as 0/1).
 _GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
                 **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}

@@ -21,10 +21,13 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     loop's ``yaw``. The same is measured between each end and its next
                     node along its own path (``step_inliers``: what one node step away
                     shares) and its path neighbour just outside the temporal window
-                    (``path_inliers``). Cached per frame pair.
+                    (``path_inliers``), and, where the two views could make an automatic
+                    loop, how far apart they are in node steps (``distance_steps``: the
+                    scale of the loop's geometry against that of each end's steps).
+                    Cached per frame pair.
 6. ``confidence``   one ranking number from the three voices.
-7. ``tiers``        auto (the two visits share as much as one node step does) or candidate
-                    (for a person), by the thresholds.
+7. ``tiers``        auto (the two visits are as close as one node step: they share as many
+                    inliers, or measure closer) or candidate (for a person), by the thresholds.
 8. ``consistency``  relative headings composed around a cycle of path and two loops must
                     close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
                     with the loops around it goes back to the candidate tier.
@@ -71,6 +74,7 @@ class Matches:
     confidence: np.ndarray = None
     closure: np.ndarray = None    # float64 node steps dead reckoning misses meeting by (stage 9; NaN unknown)
     plane_share: np.ndarray = None  # float64 share of inliers on one plane (stage 5; NaN unknown)
+    distance_steps: np.ndarray = None  # float64 the two visits apart, in node steps (stage 5; NaN unknown)
 
     def __len__(self) -> int:
         return int(self.a.size)
@@ -191,7 +195,8 @@ def _verified(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cac
     return np.asarray([store[k] for k in keys], np.float64)
 
 
-def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap: int, cache: dict) -> dict:
+def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap: int, cache: dict,
+             distance_from: int = 0) -> dict:
     """Stage 5: two-view geometry on the sphere of node pairs (a, b), and of each end with its
     path neighbour ``gap`` nodes away (the nearest node that could be a loop).
 
@@ -199,13 +204,15 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
     ``yaw`` (degrees, shifted frames; NaN where no model), ``path_inliers`` (the larger
     count of the two ends with their path neighbours, before or after), ``step_inliers``
     (each end's count with its nearer-sharing next node, before or after; the smaller end's)
-    and ``plane_share`` (share of the pair's inliers on one plane, ``engine.sphere.plane_share``;
-    NaN without an essential model)."""
+    ``plane_share`` (share of the pair's inliers on one plane, ``engine.sphere.plane_share``;
+    NaN without an essential model) and ``distance_steps`` (``_distance_steps``, for pairs with
+    at least ``distance_from`` inliers, NaN for the others: it costs up to four more two-view
+    fits per pair, and only pairs that could become automatic loops need it)."""
     n = a.size
     out = {"matches": np.full(n, -1, np.int64), "inliers": np.full(n, -1, np.int64),
            "inlier_ratio": np.full(n, np.nan), "yaw": np.full(n, np.nan),
            "path_inliers": np.full(n, -1, np.int64), "step_inliers": np.full(n, -1, np.int64),
-           "plane_share": np.full(n, np.nan)}
+           "plane_share": np.full(n, np.nan), "distance_steps": np.full(n, np.nan)}
     if features is None or n == 0:
         return out
     pair = _verified(features, node_rows, a, b, cache)
@@ -215,6 +222,55 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
                                      _neighbour_inliers(features, node_rows, b, gap, cache))
     out["step_inliers"] = np.minimum(_neighbour_inliers(features, node_rows, a, 1, cache),
                                      _neighbour_inliers(features, node_rows, b, 1, cache))
+    near = np.flatnonzero(out["inliers"] >= max(int(distance_from), 1))
+    out["distance_steps"][near] = _distance_steps(features, node_rows, a[near], b[near], cache)
+    return out
+
+
+def _two_view(features, row_a: int, row_b: int, cache: dict):
+    """``engine.sphere.two_view`` of two frames (the fit ``verify_pairs`` makes), cached per pair."""
+    from . import sphere
+
+    store = cache.setdefault("two_view", {})
+    key = (int(row_a), int(row_b))
+    if key not in store:
+        store[key] = sphere.two_view(features.of(key[0]), features.of(key[1]))
+    return store[key]
+
+
+def _distance_steps(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, cache: dict) -> np.ndarray:
+    """How far apart the two views of each pair (a, b) are, in node steps: for each end, the
+    median of ``engine.sphere.baseline_ratio`` of the pair against the end's step to its
+    previous and to its next node; the larger of the two ends (NaN unless both are known).
+
+    Two views' geometry knows the direction between them, not the distance; a point seen
+    from an end is also triangulated by that end's step along its own path, whose length is
+    one node step, and that gives the loop's length in steps. On the first synthetic family
+    (seeds 0-4, 2,900 estimates against the true positions) estimates from at least
+    ``sphere.COMMON_POINTS_MIN`` common points were all within a factor 1.42 of the truth,
+    95 % within 12 %; both ends must agree to be small, so one end's bad estimate cannot
+    make a loop. Cached per frame pair and the neighbours used."""
+    from . import sphere
+
+    store = cache.setdefault("distance_steps", {})
+    m = node_rows.size
+    out = np.full(a.size, np.nan)
+    for k, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
+        near = tuple(int(node_rows[n]) if 0 <= n < m else -1 for n in (i - 1, i, i + 1, j - 1, j, j + 1))
+        if near not in store:
+            loop = _two_view(features, node_rows[i], node_rows[j], cache)
+            ends = []
+            for end, side in ((i, 0), (j, 1)):
+                ratios = []
+                for other in (end - 1, end + 1):
+                    if 0 <= other < m and other not in (i, j):
+                        lo, hi = min(end, other), max(end, other)
+                        step = _two_view(features, node_rows[lo], node_rows[hi], cache)
+                        ratios.append(sphere.baseline_ratio(loop, side, step, 0 if lo == end else 1))
+                ratios = [r for r in ratios if np.isfinite(r)]
+                ends.append(float(np.median(ratios)) if ratios else np.nan)
+            store[near] = max(ends) if all(np.isfinite(ends)) else np.nan
+        out[k] = store[near]
     return out
 
 
@@ -265,7 +321,11 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     node step: the physical reference comes from the recording itself (texture, camera,
     node spacing), not from a number tuned on one world. On the first synthetic family
     the true revisits share 0.8-2.6 times a step's inliers, views 1-3 m apart 0.5-0.9 times
-    (5th-95th percentiles of the matches kept by stage 4). Nor may more than
+    (5th-95th percentiles of the matches kept by stage 4). Or, measured rather than
+    counted, the two views are at most ``auto_distance_steps`` node steps apart
+    (``distance_steps``): inliers fall with distance, but also with what changed between
+    two visits (light, people, the camera's tilt), so a revisit half a step away can share
+    fewer inliers than a step made a second apart; the distance does not care. Nor may more than
     ``auto_plane_share`` of the inliers lie on one plane: a flat picture copied elsewhere (a
     poster, a printed facade, a repeated wall texture) fits two views as well as the place
     does; a revisit sees things at several depths.
@@ -278,7 +338,9 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     agrees with it."""
     step = np.maximum(c.step_inliers if c.step_inliers is not None else np.zeros(len(c), np.int64), 0)
     plane = c.plane_share if c.plane_share is not None else np.full(len(c), np.nan)
-    geo_strong = ((c.inliers >= params.auto_inliers) & (c.inliers >= params.auto_step_share * step)
+    apart = c.distance_steps if c.distance_steps is not None else np.full(len(c), np.nan)
+    one_place = (c.inliers >= params.auto_step_share * step) | (apart <= params.auto_distance_steps)   # NaN: no
+    geo_strong = ((c.inliers >= params.auto_inliers) & one_place
                   & ~(plane > params.auto_plane_share))                          # NaN: not flat
 
     no_geo = c.inliers < 0
@@ -448,9 +510,11 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
                | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
     c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
     c = c.take(one_per_place(c, params.place_radius))                  # 4
-    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache)   # 5
+    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache,    # 5
+                   distance_from=params.auto_inliers)
     c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
     c.path_inliers, c.step_inliers, c.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
+    c.distance_steps = geo["distance_steps"]
     c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
     if columns is not None and len(c):
         c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
@@ -481,4 +545,6 @@ def _evidence(c: Matches, i: int) -> dict:
             "confidence": float(c.confidence[i]),
             "closure": float(c.closure[i]) if np.isfinite(c.closure[i]) else None,
             "plane_share": (float(c.plane_share[i]) if c.plane_share is not None and np.isfinite(c.plane_share[i])
-                            else None)}
+                            else None),
+            "distance_steps": (float(c.distance_steps[i])
+                               if c.distance_steps is not None and np.isfinite(c.distance_steps[i]) else None)}

@@ -100,6 +100,12 @@ PARAMETERS: tuple[Parameter, ...] = (
               "one node step)",
               "chosen on the first synthetic family (seeds 0-4): 1.0 left no wrong automatic "
               "loop there, 0.9 four (views 1.0-1.4 m apart)", 0.0, 100.0),
+    Parameter("auto_distance_steps", float, 1.0, _NEW,
+              "an automatic loop's ends may instead be at most this many node steps apart, measured "
+              "by two-view geometry scaled by each end's own steps (the same place is closer than "
+              "one node step)",
+              "one node step by definition; on the first synthetic family (seeds 0-4) no loop of "
+              "up to 1.2 steps was more than 1 m apart", 0.0, 100.0),
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",
@@ -150,6 +156,7 @@ class MapParams:
     auto_inliers: int = 40
     auto_geometry_z: float = 3.5
     auto_step_share: float = 1.0
+    auto_distance_steps: float = 1.0
     auto_plane_share: float = 0.6
     place_radius: int = 4
     heading_tol: float = 35.0

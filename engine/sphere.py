@@ -452,6 +452,24 @@ PLANE_DRAWS = 200
 PLANE_MIN_POINTS = 12
 
 
+def ray_depths(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Depths of matched bearings (a in view a, b in view b, unit (n, 3)) triangulated with
+    ``X_b = R X_a + t`` by the midpoint of the two rays: ``(s, u, ok)`` with the point at ``s a``
+    in a's frame and ``u b`` in b's, both in units of ``|t|``; ``ok`` where the rays are at
+    least ``PARALLAX_MIN`` apart and the point lies in front of both views."""
+    r, t = np.asarray(r, np.float64), np.asarray(t, np.float64).ravel()
+    p, q = np.asarray(a, np.float64) @ r.T, np.asarray(b, np.float64)   # rays of a in b's frame
+    pq = np.einsum("ij,ij->i", p, q)
+    det = 1.0 - pq * pq
+    ok = det > PARALLAX_MIN ** 2
+    # s p - u q = -t in least squares (p, q unit)
+    safe = np.where(ok, det, 1.0)
+    s = (-(p @ t) + pq * (q @ t)) / safe
+    u = ((q @ t) - pq * (p @ t)) / safe
+    return s, u, ok & (s > 0) & (u > 0)
+
+
 def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed: int = 0) -> float:
     """Share of matched bearings (a in view a, b in view b, unit (n, 3)) whose triangulated
     points lie on the one plane that holds the most of them, for ``X_b = R X_a + t``.
@@ -461,14 +479,7 @@ def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed
     a repeated wall texture) see one plane, and a plane explains any two views of it with a
     relative pose of its own, so the geometry alone cannot tell that copy from the place.
     NaN where fewer than ``PLANE_MIN_POINTS`` points have a depth."""
-    r, t = np.asarray(r, np.float64), np.asarray(t, np.float64).ravel()
-    p, q = np.asarray(a, np.float64) @ r.T, np.asarray(b, np.float64)   # rays of a in b's frame
-    pq = np.einsum("ij,ij->i", p, q)
-    det = 1.0 - pq * pq
-    ok = det > PARALLAX_MIN ** 2
-    # s p - u q = -t in least squares (p, q unit): s = (-p.t + (p.q)(q.t)) / det
-    s = (-(p @ t) + pq * (q @ t)) / np.where(ok, det, 1.0)
-    ok &= s > 0
+    s, _, ok = ray_depths(r, t, a, b)
     x = s[ok, None] * np.asarray(a, np.float64)[ok]                  # points in a's frame
     n = x.shape[0]
     if n < PLANE_MIN_POINTS:
@@ -484,6 +495,45 @@ def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed
     dist = np.abs(x @ normal.T - offset[None, :])                      # (n, planes)
     on = dist <= PLANE_TOL * np.linalg.norm(x, axis=1)[:, None]
     return float(on.sum(axis=0).max() / n)
+
+
+# Points both models must triangulate for a baseline ratio (``baseline_ratio``). On the first
+# synthetic family (seeds 0-4, ratios against true positions) estimates from 20 or more
+# points were all within a factor 1.42 (95 % within 12 %); from 12-19, 5 % were off by more
+# than 1.5x and one by 6x; from fewer, 7-16 % by more than 1.5x.
+COMMON_POINTS_MIN = 20
+
+
+def _depths_at(tv: TwoView, end: int) -> dict:
+    """Depth (units of the model's |t|) of each triangulated inlier, keyed by its feature's
+    position in view ``end`` (0: a, 1: b)."""
+    m = tv.inlier_mask
+    s, u, ok = ray_depths(tv.rotation, tv.translation, bearings(tv.uv_a[m]), bearings(tv.uv_b[m]))
+    uv = (tv.uv_a if end == 0 else tv.uv_b)[m][ok]
+    depth = (s if end == 0 else u)[ok]
+    return dict(zip(map(tuple, uv.tolist()), depth.tolist()))
+
+
+def baseline_ratio(loop: TwoView, loop_end: int, step: TwoView, step_end: int) -> float:
+    """How far apart the two views of ``loop`` are, in units of the baseline of ``step``: two
+    models that share one frame (view ``loop_end`` of ``loop``, view ``step_end`` of ``step``;
+    0 is a, 1 is b).
+
+    An essential model knows its baseline's direction, not its length, so it triangulates
+    points in units of that length. A point seen from the shared frame has one true depth,
+    so for every feature of the shared frame that both models triangulate, depth in step
+    units / depth in loop units = |t_loop| / |t_step|: the median over those points, the
+    scale that two-view geometry alone cannot give (the three-view idea of structure from
+    motion). NaN where either has no essential model (a pure rotation is chosen also when
+    every match is far away, so it does not mean the same spot: the first synthetic family
+    has such pairs 5-14 m apart) or fewer than ``COMMON_POINTS_MIN`` points are common."""
+    if loop.model != "essential" or step.model != "essential":
+        return float("nan")
+    in_loop, in_step = _depths_at(loop, loop_end), _depths_at(step, step_end)
+    common = in_loop.keys() & in_step.keys()
+    if len(common) < COMMON_POINTS_MIN:
+        return float("nan")
+    return float(np.median([in_step[k] / in_loop[k] for k in common]))
 
 
 def motion_azimuth(r: np.ndarray, t: np.ndarray) -> float:

@@ -96,7 +96,8 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
 
     From the loop arc's evidence attributes (``engine.graph.EVIDENCE_KEYS``: ``score`` and
     ``support`` in standard deviations above the recording's background, ``matches``,
-    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``closure``, ``plane_share``, ``direction``,
+    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``distance_steps``, ``closure``, ``plane_share``,
+    ``direction``,
     ``confidence``);
     the feature counts of
     ``matches`` (computed for the view) take the place of the arc's when given.
@@ -121,6 +122,8 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
                    else f"inliers {int(inl)}{ratio_text}")
     if num("step_inliers") is not None:
         out.append(f"one step along the path shares {int(num('step_inliers'))}")
+    if num("distance_steps") is not None:
+        out.append(f"the two views {num('distance_steps'):.2f} node steps apart")
     if num("closure") is not None:
         out.append(f"the path meets itself again within {num('closure'):.1f} node steps")
     if num("plane_share") is not None:

@@ -42,6 +42,16 @@ def test_two_views_sharing_less_than_one_node_step_are_not_an_automatic_loop():
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
+def test_views_measured_closer_than_one_node_step_are_one_place_though_they_share_less():
+    # A revisit half a step away, in other light and with other people about, can share
+    # fewer inliers than a step made a second apart; its measured distance says one place.
+    strong = P.auto_inliers * 3
+    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[P.candidate_z + 1] * 3, inliers=[strong] * 3,
+                ratio=[0.8] * 3, step=[strong * 2] * 3, confidence=[P.candidate_confidence + 10] * 3)
+    c.distance_steps = np.array([0.5 * P.auto_distance_steps, 1.5 * P.auto_distance_steps, np.nan])
+    assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
+
+
 def test_views_whose_inliers_lie_on_one_plane_are_left_to_a_person():
     # A flat picture copied elsewhere (a poster, a repeated wall texture) fits two views as
     # well as a revisit does; the revisit sees things at several depths.
