@@ -28,6 +28,9 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 6. ``confidence``   one ranking number from the three voices.
 7. ``tiers``        auto (the two visits are as close as one node step: they share as many
                     inliers, or measure closer) or candidate (for a person), by the thresholds.
+   ``nearest``      a match that geometry confirms as the same scene, not yet as the same
+                    place, moves to the pair one node beside it whose views measure closest,
+                    when those are at most ``auto_distance_steps`` apart (an automatic loop).
 8. ``consistency``  relative headings composed around a cycle of path and two loops must
                     close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
                     with the loops around it goes back to the candidate tier.
@@ -311,7 +314,7 @@ def confidence(c: Matches) -> np.ndarray:
     return c.score + sup + lift / INLIERS_PER_Z
 
 
-def tiers(c: Matches, params: MapParams) -> np.ndarray:
+def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray:
     """Stage 7: "auto", "candidate" or "" (dropped) for every match.
 
     Automatic: a match at least at ``auto_geometry_z`` whose two views share ``auto_inliers``
@@ -335,11 +338,14 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
     support and geometry together) reaches ``candidate_confidence``: a node's best match in a
     large recording is a few standard deviations up by chance alone (the best of 25,000
     unrelated scores is about 4), but then nothing along the stretch or in the geometry
-    agrees with it."""
+    agrees with it. ``share_steps=False`` leaves out the inlier count against a step (the
+    measured distance alone says "one place"; stage 7b)."""
     step = np.maximum(c.step_inliers if c.step_inliers is not None else np.zeros(len(c), np.int64), 0)
     plane = c.plane_share if c.plane_share is not None else np.full(len(c), np.nan)
     apart = c.distance_steps if c.distance_steps is not None else np.full(len(c), np.nan)
-    one_place = (c.inliers >= params.auto_step_share * step) | (apart <= params.auto_distance_steps)   # NaN: no
+    one_place = (apart <= params.auto_distance_steps)                                 # NaN: no
+    if share_steps:
+        one_place |= c.inliers >= params.auto_step_share * step
     geo_strong = ((c.inliers >= params.auto_inliers) & one_place
                   & ~(plane > params.auto_plane_share))                          # NaN: not flat
 
@@ -349,6 +355,54 @@ def tiers(c: Matches, params: MapParams) -> np.ndarray:
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))
+
+
+def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node_rows: np.ndarray,
+            shifts: np.ndarray, frame_width: int, params: MapParams, cache: dict) -> tuple[Matches, np.ndarray]:
+    """Stage 7b: a match with ``auto_inliers`` that stage 7 did not make automatic moves to
+    the pair one node beside it (on either end or both) whose two views measure closest
+    (``distance_steps``), when that pair passes stage 7 by its measured distance (score,
+    inliers, plane share and at most ``auto_distance_steps`` apart); it then is that pair.
+
+    Stage 4 keeps of each place the pair with the best descriptor evidence, but where two
+    paths only touch (a crossing, a return offset to one side) the two views closest in
+    space can be one node beside it, and only they are one place. The move is judged by the
+    measured distance alone: moving to the neighbour with the most inliers instead (tried in
+    the third round) made 3 false loops on the first family, pairs one step along a shared
+    stretch sharing more than a step does. On the first family (seeds 0-4) this stage closed
+    one more place and made no false loop. Costs up to eight more two-view fits per such
+    match (cached with the others)."""
+    m = node_rows.size
+    todo = np.flatnonzero((status != "auto") & (c.inliers >= params.auto_inliers))
+    if features is None or todo.size == 0:
+        return c, status
+    da, db = (d.ravel() for d in np.meshgrid([-1, 0, 1], [-1, 0, 1]))
+    beside = (da != 0) | (db != 0)
+    da, db = da[beside], db[beside]
+    na, nb = (c.a[todo, None] + da).ravel(), (c.b[todo, None] + db).ravel()
+    owner = np.repeat(todo, da.size)
+    ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
+    na, nb, owner = na[ok], nb[ok], owner[ok]
+    cos, score = calibrate(v, stats, na, nb)
+    n = Matches(a=na, b=nb, cosine=cos, score=score)
+    n.support, n.direction = support(v, stats, na, nb, params)
+    geo = geometry(features, node_rows, na, nb, params.neighbor_node_num + 1, cache, distance_from=params.auto_inliers)
+    n.matches, n.inliers, n.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
+    n.path_inliers, n.step_inliers, n.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
+    n.distance_steps = geo["distance_steps"]
+    n.yaw = original_yaw(geo["yaw"], shifts[na], shifts[nb], frame_width)
+    n.confidence = confidence(n)
+    close = tiers(n, params, share_steps=False) == "auto"      # by the measured distance alone
+    c, status = c.take(np.arange(len(c))), status.copy()
+    for i in todo:
+        mine = np.flatnonzero(close & (owner == i))
+        if mine.size:
+            j = mine[np.argmin(n.distance_steps[mine])]
+            for key, value in n.__dict__.items():
+                if value is not None and getattr(c, key) is not None:
+                    getattr(c, key)[i] = value[j]
+            status[i] = "auto"
+    return c, status
 
 
 # Heading drift per node step along the path, degrees (consecutive alignments err by a few
@@ -520,6 +574,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
         c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
     c.confidence = confidence(c)                                       # 6
     status = tiers(c, params)                                          # 7
+    c, status = nearest(c, status, v, stats, features, node_rows, shifts, frame_width, params, cache)   # 7b
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
     status = consistency(c, status, headings, params)                  # 8
     track = path_track(features, node_rows, shifts, frame_width, headings, cache)
