@@ -15,7 +15,7 @@ def tiered_map() -> TopoMap:
     loops = [
         LoopCandidate(2, 15, 0.71, 0, yaw=90.0, status="auto",
                       evidence={"score": 6.5, "inliers": 120, "matches": 180, "inlier_ratio": 0.66,
-                                "support": 3.1, "direction": 1, "confidence": 9.0}),
+                                "support": 3.1, "direction": 1, "confidence": 9.0, "distance_steps": 0.4}),
         LoopCandidate(5, 12, 0.58, 0, status="candidate", evidence={"score": 3.2, "support": float("nan")}),
     ]
     return TopoMap.build(descriptors(), np.arange(0, 40, 2), loops, PARAMS)
@@ -40,6 +40,9 @@ def test_evidence_is_typed_in_graphml_and_missing_numbers_are_left_out(tmp_path)
     assert isinstance(auto["inliers"], int) and auto["inliers"] == 120
     assert auto["inlier_ratio"] == pytest.approx(0.66)
     assert auto["direction"] == 1 and auto["tier"] == "auto"
+    assert auto["distance_steps"] == pytest.approx(0.4)
+    g = igraph.Graph.Read_GraphML(str(tmp_path / "all.graphml"))   # an independent reader
+    assert [e["distance_steps"] for e in g.es if e["kind"] == "loop" and e["status"] == "auto"] == [pytest.approx(0.4)]
     cand = back.graph.edges["n5", "n12"]
     assert "support" not in cand          # NaN evidence is not written as a number
     assert cand["tier"] == "candidate"
