@@ -230,6 +230,18 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
     return out
 
 
+def measure(c: Matches, features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
+            params: MapParams, cache: dict) -> None:
+    """Stage 5 on the matches ``c``, in place: ``geometry`` of each pair (the distance where it
+    has ``auto_inliers``) and its yaw between the original frames."""
+    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache,
+                   distance_from=params.auto_inliers)
+    c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
+    c.path_inliers, c.step_inliers, c.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
+    c.distance_steps = geo["distance_steps"]
+    c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
+
+
 def _two_view(features, row_a: int, row_b: int, cache: dict):
     """``engine.sphere.two_view`` of two frames (the fit ``verify_pairs`` makes), cached per pair."""
     from . import sphere
@@ -386,11 +398,7 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     cos, score = calibrate(v, stats, na, nb)
     n = Matches(a=na, b=nb, cosine=cos, score=score)
     n.support, n.direction = support(v, stats, na, nb, params)
-    geo = geometry(features, node_rows, na, nb, params.neighbor_node_num + 1, cache, distance_from=params.auto_inliers)
-    n.matches, n.inliers, n.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
-    n.path_inliers, n.step_inliers, n.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
-    n.distance_steps = geo["distance_steps"]
-    n.yaw = original_yaw(geo["yaw"], shifts[na], shifts[nb], frame_width)
+    measure(n, features, node_rows, shifts, frame_width, params, cache)
     n.confidence = confidence(n)
     close = tiers(n, params, share_steps=False) == "auto"      # by the measured distance alone
     c, status = c.take(np.arange(len(c))), status.copy()
@@ -564,12 +572,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
                | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
     c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
     c = c.take(one_per_place(c, params.place_radius))                  # 4
-    geo = geometry(features, node_rows, c.a, c.b, params.neighbor_node_num + 1, cache,    # 5
-                   distance_from=params.auto_inliers)
-    c.matches, c.inliers, c.inlier_ratio = geo["matches"], geo["inliers"], geo["inlier_ratio"]
-    c.path_inliers, c.step_inliers, c.plane_share = geo["path_inliers"], geo["step_inliers"], geo["plane_share"]
-    c.distance_steps = geo["distance_steps"]
-    c.yaw = original_yaw(geo["yaw"], shifts[c.a], shifts[c.b], frame_width)
+    measure(c, features, node_rows, shifts, frame_width, params, cache)   # 5
     if columns is not None and len(c):
         c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
     c.confidence = confidence(c)                                       # 6
