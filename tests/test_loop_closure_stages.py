@@ -52,6 +52,16 @@ def test_views_measured_closer_than_one_node_step_are_one_place_though_they_shar
     assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
 
 
+def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much_they_share():
+    # An offset return 1.4 m to the side can share as many inliers as a step; where the
+    # distance is measured, it decides.
+    strong = P.auto_inliers * 3
+    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[P.candidate_z + 1] * 3, inliers=[strong] * 3,
+                ratio=[0.8] * 3, step=[strong - 1] * 3, confidence=[P.candidate_confidence + 10] * 3)
+    c.distance_steps = np.array([0.5 * P.auto_distance_steps, 1.8 * P.auto_distance_steps, np.nan])
+    assert tiers(c, P).tolist() == ["auto", "candidate", "auto"]
+
+
 def test_views_whose_inliers_lie_on_one_plane_are_left_to_a_person():
     # A flat picture copied elsewhere (a poster, a repeated wall texture) fits two views as
     # well as a revisit does; the revisit sees things at several depths.
