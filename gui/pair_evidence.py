@@ -96,11 +96,9 @@ def evidence_lines(attrs: Optional[dict], matches: Optional[PairMatches], simila
 
     From the loop arc's evidence attributes (``engine.graph.EVIDENCE_KEYS``: ``score`` and
     ``support`` in standard deviations above the recording's background, ``matches``,
-    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``distance_steps``, ``closure``, ``plane_share``,
-    ``direction``,
-    ``confidence``);
-    the feature counts of
-    ``matches`` (computed for the view) take the place of the arc's when given.
+    ``inliers``, ``inlier_ratio``, ``step_inliers``, ``distance_steps``, ``closure``,
+    ``plane_share``, ``direction``, ``confidence``); the feature counts of ``matches``
+    (computed for the view) take the place of the arc's when given.
     """
     attrs = attrs or {}
 

@@ -185,10 +185,7 @@ class FolderSource(IndexedSource):
         size = image_file_size(file)  # from the header: refuse a huge image before decoding it
         if size is not None:
             frame_size(*size, str(file))
-        bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise InputError(f"{file}: unreadable or corrupt image")
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        rgb = _decode(file, cv2.IMREAD_COLOR)
         check_equirectangular(rgb, str(file))
         return rgb
 
@@ -216,10 +213,7 @@ class FolderSource(IndexedSource):
         if factor == 1:
             return self.frame_at(index)
         flag = {2: cv2.IMREAD_REDUCED_COLOR_2, 4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}[factor]
-        bgr = cv2.imread(str(file), flag)
-        if bgr is None:
-            raise InputError(f"{file}: unreadable or corrupt image")
-        return Frame(index, float(self._stamps[index]), cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), size[0])
+        return Frame(index, float(self._stamps[index]), _decode(file, flag), size[0])
 
     def frame_at(self, index: int) -> Frame:
         if not 0 <= index < len(self.files):
@@ -232,3 +226,11 @@ class FolderSource(IndexedSource):
         if tuple(size) != self._resolution:
             w, h = self._resolution
             raise InputError(f"{file}: image is {size[0]}x{size[1]}, the folder's first image is {w}x{h}")
+
+
+def _decode(file: Path, flag: int) -> np.ndarray:
+    """RGB of an image file decoded by OpenCV with ``flag`` (full size or reduced)."""
+    bgr = cv2.imread(str(file), flag)
+    if bgr is None:
+        raise InputError(f"{file}: unreadable or corrupt image")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
