@@ -76,6 +76,10 @@ class FrameSource(ABC):
     """A recording: random access for the GUI, sampled iteration for the engine."""
 
     path: Path
+    # Threads the reader keeps busy decoding while ``frames()`` is read, besides the read-ahead
+    # thread (which mostly waits for the describing: 0 for most readers). The cores left over
+    # go to the descriptor's network (``engine.prefetch.cores_left``).
+    reader_threads: int = 0
 
     @property
     @abstractmethod

@@ -84,9 +84,11 @@ def describe(
 def describe_source(source: FrameSource, settings: DescribeSettings, model, where: str = "",
                     progress: Optional[Progress] = None, cancel: Optional[CancelToken] = None) -> Descriptors:
     """Descriptors of an open recording: frames sampled, decoded in a thread while the previous
-    ones are described (``engine.prefetch``), delivered no wider than the working copy."""
+    ones are described (``engine.prefetch``), delivered no wider than the working copy; the
+    network gets the cores the reader's decoding threads leave (``prefetch.cores_left``)."""
+    from .descriptors.accel import cpu_threads
     from .frame_guard import check_describe_memory, checked_frames
-    from .prefetch import prefetched
+    from .prefetch import cores_left, prefetched
 
     expected = source.expected_samples(settings.interval)
     check_describe_memory(expected, model, where)
@@ -94,8 +96,9 @@ def describe_source(source: FrameSource, settings: DescribeSettings, model, wher
     frames = prefetched(checked_frames(source, settings.interval, settings.skip_bad_frames, skipped,
                                        max_width=work_width(model)))
     try:
-        result = describe_frames(frames, expected, settings, model=model, source=where,
-                                 progress=progress, cancel=cancel)
+        with cpu_threads(cores_left(source.reader_threads)):
+            result = describe_frames(frames, expected, settings, model=model, source=where,
+                                     progress=progress, cancel=cancel)
     finally:
         frames.close()   # on cancel or error too: reading stops before the caller closes the source
     result.meta["skipped_frames"] = skipped

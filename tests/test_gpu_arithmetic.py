@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from engine.descriptors import mapvocab
-from engine.descriptors.accel import compute, resolve_precision, to_network_input
+from engine.descriptors.accel import compute, resize, resolve_precision, shrink_on_host, to_network_input
 from engine.descriptors.anyloc import anyloc_vlad
 from engine.descriptors.efficientnet import EfficientNetVLAD, sector_vlad, sector_weights
 from engine.descriptors.vlad import kmeans_cosine, vlad
@@ -81,6 +81,21 @@ def test_frames_of_mixed_sizes_are_each_resized():
     b = np.full((32, 64, 3), 200, np.uint8)
     x = to_network_input([a, b, a], (16, 32), (14, 28), torch.device("cpu"), "test")
     assert x.shape == (3, 3, 14, 28) and torch.allclose(x[0], x[1], atol=1e-5) and torch.allclose(x[0], x[2])
+
+
+def test_the_cpus_host_shrink_gives_the_devices_input():
+    """On the CPU whole-factor shrinks run in OpenCV on the host; a GPU pools on the device
+    with torch. Both must hand the network the same numbers (the CPU/GPU agreement)."""
+    rng = np.random.default_rng(3)
+    for shape, size in (((512, 1024, 3), (128, 256)), ((96, 192, 3), (32, 48)), ((128, 256, 3), (128, 256))):
+        imgs = [rng.integers(0, 256, shape, dtype=np.uint8) for _ in range(3)]
+        host = shrink_on_host(imgs, size)
+        device = resize(torch.from_numpy(np.stack(imgs)).permute(0, 3, 1, 2).float(), size)
+        assert host is not None and np.abs(host.transpose(0, 3, 1, 2) - device.numpy()).max() < 1e-3
+    odd = [rng.integers(0, 256, (100, 200, 3), dtype=np.uint8)]
+    assert shrink_on_host(odd, (32, 64)) is None      # not whole factors: left to torch
+    x = to_network_input(odd, (32, 64), (32, 64), torch.device("cpu"), "test")
+    assert x.shape == (1, 3, 32, 64)
 
 
 def test_precision_choices():

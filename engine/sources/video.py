@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import Frame, FrameSource, check_equirectangular
 from ..validate import frame_size
-from .video_av import AvSampler, AvUnavailable
+from .video_av import DECODE_THREADS, AvSampler, AvUnavailable
 
 # FFmpeg prints its own line for a broken file ("moov atom not found") before our one-line
 # error; keep it quiet (read when the first video is opened; set the variable to override).
@@ -110,6 +110,11 @@ class VideoSource(FrameSource):
         """The PyAV sampler in use (None on the OpenCV path): its ``last_stats`` tell
         what the last ``frames()`` decoded."""
         return self._av()
+
+    @property
+    def reader_threads(self) -> int:
+        """The PyAV sampler's decoding threads, each busy with 4K key frames; 0 on the OpenCV path."""
+        return DECODE_THREADS if self._av() is not None else 0
 
     def sample_indices(self, interval: float = 1.0) -> np.ndarray:
         """The frames ``frames(interval)`` delivers (key frames where the sampler uses them)."""
