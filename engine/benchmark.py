@@ -119,6 +119,8 @@ class Row:
     candidates: int = 0              # undecided candidates in the map (two-tier methods)
     false_candidates: int = 0        # of them, not the same place (or temporal neighbours)
     events_with_candidates: int = 0  # revisit events found by an auto loop or a candidate
+    event_closest: tuple = ()        # per event: closest same-place pair, metres
+    event_found: tuple = ()          # per event: found by an automatic loop
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -153,7 +155,8 @@ def score_map(topomap, poses: Poses, case, method: str, eval_nn: int = 5, fps: f
     return Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
                ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
                ev.events_total, fps, getattr(case, "people", 0), getattr(case, "family", "synth"),
-               cands, with_cand.fp - ev.fp, with_cand.events_found)
+               cands, with_cand.fp - ev.fp, with_cand.events_found,
+               tuple(ev.event_closest), tuple(ev.event_found))
 
 
 PAPER_METHODS = ("simple", "shift-simple", "ours")

@@ -76,6 +76,10 @@ class Evaluation:
     loop_truth: dict[tuple[str, str], str] = field(default_factory=dict)
     dist_th: float = 1.0
     neighbor_node_num: int = 0
+    # Per revisit event: how close the two visits came (metres, its closest same-place pair)
+    # and whether it was found; a benchmark reads how recall depends on that distance.
+    event_closest: list[float] = field(default_factory=list)
+    event_found: list[bool] = field(default_factory=list)
 
     def undefined(self) -> tuple[str, ...]:
         """The ratios with a zero denominator (no detections: precision; no positives: recall).
@@ -208,6 +212,10 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
     labels = _events(pi, pj, m)
     found = np.unique(labels[~missed]).size
     events_total = np.unique(labels).size
+    event_ids = np.unique(labels)
+    pair_dist = np.hypot(x[pi] - x[pj], y[pi] - y[pj])
+    event_closest = [float(pair_dist[labels == e].min()) for e in event_ids]
+    event_found = [bool(np.any(~missed[labels == e])) for e in event_ids]
 
     return Evaluation(
         tp=tp, fp=fp, tn=tn, fn=fn,
@@ -216,4 +224,5 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         tp_pairs=tp_pairs, fp_pairs=fp_pairs, fn_pairs=fn_pairs,
         events_found=int(found), events_total=int(events_total),
         loop_truth=loop_truth, dist_th=float(dist_th), neighbor_node_num=nn,
+        event_closest=event_closest, event_found=event_found,
     )
