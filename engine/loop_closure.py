@@ -349,14 +349,6 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     ``auto_plane_share`` of the inliers lie on one plane: a flat picture copied elsewhere (a
     poster, a printed facade, a repeated wall texture) fits two views as well as the place
     does; a revisit sees things at several depths.
-    The score must reach ``auto_geometry_z``, or only ``candidate_z`` where both physical
-    voices agree (measured within ``auto_distance_steps`` and sharing ``auto_step_share`` of a
-    step's inliers): look-alike places elsewhere can fool one of them, not both (second
-    family, seeds 3 and 25: corridors 6 and 19 m apart measured 0.3 steps apart but shared
-    half of a step's inliers; with the score floor at candidate_z for either voice alone they
-    became two false loops). No new number: on the first family (seeds 0-4) any floor from
-    2 to 3.5 gave the same loops; on the second family's seen seeds 1-26 this found 3 more
-    places and no false loop (benchmarks/results/loop_evidence.md).
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
@@ -374,13 +366,9 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     geo_strong = ((c.inliers >= params.auto_inliers) & one_place
                   & ~(plane > params.auto_plane_share))                          # NaN: not flat
 
-    # Both physical voices agree (measured within a step AND sharing a step's inliers): the
-    # descriptor need only have made the match a candidate.
-    both = ((apart <= params.auto_distance_steps) & (c.inliers >= params.auto_step_share * step)
-            & (c.score >= params.candidate_z))
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    auto = ((geo_strong & ((c.score >= params.auto_geometry_z) | both))
+    auto = ((geo_strong & (c.score >= params.auto_geometry_z))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))

@@ -62,19 +62,6 @@ def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much
     assert tiers(c, P).tolist() == ["auto", "candidate", "auto"]
 
 
-def test_below_the_automatic_score_only_both_physical_voices_together_make_an_automatic_loop():
-    # A look-alike corridor elsewhere can measure close (its geometry fitted to the repeated
-    # structure) or share many inliers, not both; a revisit does both.
-    strong = P.auto_inliers * 3
-    low = (P.candidate_z + P.auto_geometry_z) / 2
-    assert P.candidate_z < low < P.auto_geometry_z
-    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[low] * 3, inliers=[strong] * 3,
-                ratio=[0.8] * 3, step=[strong - 1, strong * 2, strong - 1],
-                confidence=[P.candidate_confidence + 10] * 3)
-    c.distance_steps = np.array([0.5, 0.3, np.nan]) * P.auto_distance_steps
-    assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
-
-
 def test_views_whose_inliers_lie_on_one_plane_are_left_to_a_person():
     # A flat picture copied elsewhere (a poster, a repeated wall texture) fits two views as
     # well as a revisit does; the revisit sees things at several depths.
