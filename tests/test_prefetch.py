@@ -73,3 +73,26 @@ def test_cancelling_a_video_describe_stops_reading_before_the_call_returns(tmp_p
     # the threads must have stopped anyway, before describe returned.
     alive = [t.name for t in threading.enumerate() if t.name.startswith(("panotopo-read-ahead", "panotopo-decode"))]
     assert not alive and caught.value.__traceback__ is not None
+
+
+def test_the_network_gets_the_cores_a_busy_reader_leaves_and_never_none():
+    from engine.prefetch import cores_left
+
+    assert cores_left(0) >= 1
+    assert cores_left(1) == max(1, cores_left(0) - 1)
+    assert cores_left(10_000) == 1
+
+
+def test_torchs_thread_count_is_limited_inside_the_block_and_restored_after_an_error():
+    import torch
+
+    from engine.descriptors.accel import cpu_threads
+
+    before = torch.get_num_threads()
+    with pytest.raises(RuntimeError):
+        with cpu_threads(1):
+            assert torch.get_num_threads() == 1
+            raise RuntimeError("describing failed")
+    assert torch.get_num_threads() == before
+    with cpu_threads(before + 8):          # never more than torch had
+        assert torch.get_num_threads() == before

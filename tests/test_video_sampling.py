@@ -181,8 +181,13 @@ def test_without_pyav_the_opencv_reader_is_used(clips, monkeypatch):
     monkeypatch.setattr(video_av, "av", None)
     with VideoSource(clips["gop1s"]) as src:
         got = delivered(src, 1.0)
-        assert src.sampler is None
+        assert src.sampler is None and src.reader_threads == 0   # decodes in the read-ahead thread
         assert [frame_number(f.rgb) for f in got] == [f.index for f in got] == list(range(0, N, FPS))
+
+
+def test_the_pyav_sampler_says_how_many_threads_it_keeps_decoding(clips):
+    with VideoSource(clips["gop1s"]) as src:
+        assert src.sampler is not None and src.reader_threads == video_av.DECODE_THREADS
 
 
 def test_truncated_or_corrupt_video_is_one_clear_line(clips, tmp_path):
