@@ -17,6 +17,7 @@ under a known roll, and what the misses cost the default descriptor (consecutive
 with frames canonically shifted, not shifted, rolled at random).
 
     python benchmarks/bench_real_descriptor.py [--data ../shared/data] [--heights 128 224 320] [--stages block7 block10]
+    python benchmarks/bench_real_descriptor.py --rolls-only --phases 1 2 4
 """
 
 from __future__ import annotations
@@ -66,6 +67,8 @@ def main() -> None:
     ap.add_argument("--layouts", nargs="+", default=["global", "sectors"])
     ap.add_argument("--rolls-only", action="store_true",
                     help="only the last table: how a roll by a few columns moves the descriptor")
+    ap.add_argument("--phases", type=int, nargs="+", default=[1],
+                    help="effnet-vlad phases compared in the rolls table (e.g. 1 2 4)")
     args = ap.parse_args()
     data = Path(args.data)
     gopro = [data / "real" / "panoramax-gopromax" / f"{i}.jpg" for i in range(1, 6)]
@@ -75,7 +78,7 @@ def main() -> None:
     images = {f"g{i + 1}": load(p) for i, p in enumerate(gopro)}
     images.update({p.stem: load(p) for p in others})
     if args.rolls_only:
-        return small_rolls(images)
+        return small_rolls(images, args.phases)
 
     # ---- canonical shift, against the heading change two-view geometry measures
     shifts = {name: canonical_shift(img) for name, img in images.items()}
@@ -144,26 +147,45 @@ def main() -> None:
 
 
 
-def small_rolls(images: dict) -> None:
+def small_rolls(images: dict, phases_list=(1,)) -> None:
     """How far a roll of a few columns (of WORK_WIDTH) moves the default descriptor of a real
     panorama: the network is not shift-invariant below its stride (block 10: 16 input pixels,
-    1/16 of the width at input height 128: 128 columns of these 2,048-column images, 5.6 degrees), so the canonical shift's jitter
-    costs similarity. Vocabulary: a map vocabulary of the real images, described unrolled."""
+    1/16 of the width at input height 128: 128 columns of these 2,048-column images, 22.5
+    degrees), so the canonical shift's jitter costs similarity. Vocabulary: a map vocabulary of
+    the real images, described unrolled. With several ``phases_list`` entries, the same for
+    effnet-vlad's ``phases`` option (features pooled over sub-stride rolls), and what each
+    does to the margin between consecutive GoPro frames and unrelated places (frames as they
+    are, and each rolled at random)."""
     plain = list(images.values())
-    model = EfficientNetVLAD()
-    model.describe(iter(plain), len(plain))
-    fixed = EfficientNetVLAD(vocabulary=model.vocabulary)
-    base = fixed.describe(iter(plain), len(plain))
+    rng = np.random.default_rng(0)
+    randomly = [np.roll(v, int(rng.integers(WORK_WIDTH)), axis=1) for v in plain]
+    gopro = [i for i, name in enumerate(images) if name.startswith("g")]
+    others = [i for i, name in enumerate(images) if not name.startswith("g")]
+    rolls = (2, 4, 8, 16, 32, 64, 128)
+    table, margins = {}, []
+    for phases in phases_list:
+        model = EfficientNetVLAD(phases=phases)
+        model.describe(iter(plain), len(plain))
+        fixed = EfficientNetVLAD(vocabulary=model.vocabulary, phases=phases)
+        base = fixed.describe(iter(plain), len(plain))
+        for roll in rolls:
+            d = fixed.describe(iter([np.roll(v, roll, axis=1) for v in plain]), len(plain))
+            cos = (d * base).sum(axis=1)
+            table[(phases, roll)] = f"{cos.min():.3f} / {np.median(cos):.3f}"
+        for way, d in (("as they are", base), ("rolled at random", fixed.describe(iter(randomly), len(plain)))):
+            near = [float(d[a] @ d[b]) for a, b in zip(gopro, gopro[1:])]
+            unrelated = float((d[gopro] @ d[others].T).max())
+            margins.append((phases, way, near, unrelated))
     print(f"\nA roll by a few columns of {WORK_WIDTH} ({', '.join(images)}; effnet-vlad 128, block10, global): "
           "cosine of each image's descriptor with its own, min / median over the images\n")
-    print("| roll (columns) | degrees | cosine min / median |\n|---:|---:|---|")
-    for roll in (2, 4, 8, 16, 32, 64, 128):
-        d = fixed.describe(iter([np.roll(v, roll, axis=1) for v in plain]), len(plain))
-        cos = (d * base).sum(axis=1)
-        print(f"| {roll} | {roll * 360 / WORK_WIDTH:.2f} | {cos.min():.3f} / {np.median(cos):.3f} |")
-    near = [float(base[i] @ base[i + 1]) for i in range(4)]
-    print(f"\nFor scale: consecutive GoPro frames (1-3 m apart) {', '.join(f'{c:.3f}' for c in near)}.")
-
+    print("| roll (columns) | degrees | " + " | ".join(f"phases {n}" for n in phases_list) + " |")
+    print("|---:|---:|" + "---|" * len(phases_list))
+    for roll in rolls:
+        print(f"| {roll} | {roll * 360 / WORK_WIDTH:.2f} | " + " | ".join(table[(n, roll)] for n in phases_list) + " |")
+    print("\nConsecutive GoPro frames (1-3 m apart) against the most similar unrelated pair:\n")
+    print("| phases | frames | consecutive pairs | unrelated max | margin (min - max) |\n|---:|---|---|---:|---:|")
+    for phases, way, near, unrelated in margins:
+        print(f"| {phases} | {way} | {', '.join(f'{c:.3f}' for c in near)} | {unrelated:.3f} | {min(near) - unrelated:+.3f} |")
 
 if __name__ == "__main__":
     main()

@@ -60,7 +60,7 @@ class _Bar:
 def _descriptor_options(args: argparse.Namespace) -> dict:
     """Descriptor-specific options given on the command line (only those set)."""
     names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim",
-             "precision")
+             "precision", "phases")
     opts = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
     if getattr(args, "allow_download", False):
         opts["allow_download"] = True
@@ -314,6 +314,9 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     g.add_argument("--batch-size", type=int)
     g.add_argument("--input-height", type=int, help="descriptor input height in pixels (width = 2 x height)")
     g.add_argument("--pca-dim", type=int, help="project descriptors to this dimension (AnyLoc)")
+    g.add_argument("--phases", type=int, help="effnet-vlad: pool the features of this many rolls of the panorama "
+                   "within one feature stride (1, 2, 4, 8, 16; default 1): steadier under heading changes, "
+                   "that many times the network's cost")
     p.add_argument("--skip-bad-frames", action="store_true",
                    help="skip frames that cannot be decoded (and say how many) instead of stopping")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the descriptor cache")

@@ -228,6 +228,27 @@ def test_shift_raises_similarity_of_rotated_copy(pano, full):
     assert gain["sectors"] > gain["global"] + 0.1
 
 
+def test_phases_keep_a_real_panorama_under_a_half_stride_roll(full):
+    # The network is not shift-invariant below its stride (16 input pixels); pooling the
+    # features of rolls within one stride is. A half-stride roll of the real panorama moves
+    # the pooled descriptor less than the plain one, with the same vocabulary.
+    img = cv2.resize(full, (512, 256), interpolation=cv2.INTER_AREA)   # 2x the network input
+    half_stride = 16                                                    # 8 input pixels
+    moved = {}
+    for phases in (1, 2):
+        vocab = registry.get("effnet-vlad", phases=phases, **SMALL)
+        vocab.describe(iter([img]), 1)
+        fixed = registry.get("effnet-vlad", phases=phases, vocabulary=vocab.vocabulary, **SMALL)
+        a, b = fixed.describe(iter([img, np.roll(img, half_stride, axis=1)]), 2)
+        moved[phases] = 1.0 - float(a @ b)
+    assert moved[2] < 0.5 * moved[1]
+    two = registry.get("effnet-vlad", phases=2, **SMALL)
+    assert two.dimension == registry.get("effnet-vlad", **SMALL).dimension
+    assert two.settings()["phases"] == 2 and "phases" not in registry.get("effnet-vlad", **SMALL).settings()
+    with pytest.raises(InputError, match="phases must be one of 1, 2, 4, 8, 16, got 3"):
+        registry.get("effnet-vlad", phases=3)
+
+
 def test_empty_input():
     model = registry.get("effnet-vlad", **SMALL)
     out = model.describe(iter([]), 0)

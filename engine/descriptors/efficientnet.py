@@ -15,6 +15,17 @@ With "sectors" the panorama shift raises recall on reverse drives, as in the pap
 (benchmarks/bench_shift.py); "global" stays the default because "sectors" also lets
 more near misses (1-3 m apart) through the paper's ``ours`` check (held-out seeds 8, 9:
 precision 0.62 instead of 0.78; ``verified`` is unchanged: 1 false loop, 16/20 events).
+Phases (``phases``, default 1): the network is not shift-invariant below its stride (16
+input pixels, 22.5 degrees at input height 128): rolling a real panorama by half a stride
+moves its descriptor by 0.2 of cosine, as much as 40 % of what two frames 1-3 m apart share,
+and two visits of one place come at random sub-stride headings. With ``phases`` = n the
+features of n copies of the panorama, rolled by 1/n of a stride each, are pooled together
+(the VLAD of their union): at n = 2 a half-stride roll keeps 0.98 of cosine (median) instead
+of 0.80, and on the real GoPro walk the margin between frames 1-3 m apart and the most similar
+unrelated place grew from 0.19 to 0.21-0.22 (n = 2) and 0.23-0.25 (n = 4)
+(``benchmarks/bench_real_descriptor.py --rolls-only --phases 1 2 4``, results/real_descriptor.md;
+four pairs of one walk: a direction, not a calibration). It costs n network passes; 1 stays
+the default because every calibrated number and benchmark recording was made with it.
 torch is imported lazily so that the registry and ``defaults`` stay cheap.
 """
 
@@ -44,6 +55,8 @@ STAGES = {"block7": (7, 80), "block10": (10, 112)}
 # Local features sampled for the vocabulary (k-means cost grows with it; 100k is plenty for k=32).
 VOCAB_SAMPLE = 100_000
 VERSION = 3  # bump when the computation changes, so caches are invalidated
+FEATURE_STRIDE = 16   # input pixels per feature column; both stages are at stride 16
+PHASES = (1, 2, 4, 8, 16)   # sub-stride rolls that divide the stride
 # Spatial layouts of the pooled vector (see the module docstring).
 LAYOUTS = ("global", "sectors")
 # Sector windows: raised cosine of this half-width in degrees (neighbouring sectors of
@@ -151,7 +164,10 @@ class EfficientNetVLAD(DescriptorModel):
         layout: str = "global",
         sectors: int = 4,
         precision: str = "auto",
+        phases: int = 1,
     ) -> None:
+        if int(phases) not in PHASES:
+            raise InputError(f"effnet-vlad: phases must be one of {', '.join(map(str, PHASES))}, got {phases}")
         if layout not in LAYOUTS:
             raise InputError(f"effnet-vlad: unknown layout '{layout}'; choose one of: {', '.join(LAYOUTS)}")
         if layout == "sectors" and not 2 <= int(sectors) <= 16:
@@ -176,6 +192,7 @@ class EfficientNetVLAD(DescriptorModel):
         self.seed = int(seed)
         self.layout = layout
         self.sectors = int(sectors) if layout == "sectors" else 0
+        self.phases = int(phases)
         # Per instance: the class attribute keeps the default configuration's thresholds.
         measured = min((h for lay, h in self.CALIBRATED if lay == layout), key=lambda h: abs(h - self.input_height))
         self.defaults = dict(self.CALIBRATED[(layout, measured)])
@@ -197,7 +214,7 @@ class EfficientNetVLAD(DescriptorModel):
 
     @property
     def feature_width(self) -> int:
-        return self.input_width // 16  # both stages are at stride 16
+        return self.input_width // FEATURE_STRIDE
 
     @property
     def dimension(self) -> int:
@@ -220,6 +237,7 @@ class EfficientNetVLAD(DescriptorModel):
             "vocabulary": vocab,
             "seed": self.seed,
             "layout": self.layout,
+            **({"phases": self.phases} if self.phases > 1 else {}),
             # Autocast changes the numbers (within the tolerances of docs/gpu.md); the device does not.
             "precision": "float32" if self.dtype is None else str(self.dtype).removeprefix("torch."),
             **({"sectors": self.sectors, "sector_halfwidth_deg": SECTOR_HALFWIDTH_DEG,
@@ -240,6 +258,7 @@ class EfficientNetVLAD(DescriptorModel):
 
     def local_features(self, batch: list[np.ndarray]) -> torch.Tensor:
         """L2-normalised local features, float32 (B, positions, C) on the device, of RGB images."""
+        import torch
         import torch.nn.functional as F
 
         from .accel import compute, to_network_input
@@ -247,11 +266,15 @@ class EfficientNetVLAD(DescriptorModel):
         model = self.network()
         size = (self.input_height, self.input_width)
         x = to_network_input(batch, size, size, self.device, "effnet-vlad")
+        if self.phases > 1:   # the panorama rolled by 1/phases of a stride each (see the module notes)
+            x = torch.cat([torch.roll(x, FEATURE_STRIDE * k // self.phases, dims=3) for k in range(self.phases)])
         with compute(self.device, self.dtype):
             # Same order as EfficientNet.extract_features: stem conv, BN, activation, blocks.
             y = model._swish(model._bn0(model._conv_stem(x)))
             for block in model._blocks[: self.last_block + 1]:
                 y = block(y)
+            if self.phases > 1:   # phases side by side: (B, C, h, phases * w), columns mod w keep their sector
+                y = torch.cat(torch.chunk(y, self.phases), dim=3)
             return F.normalize(y.float().flatten(2).transpose(1, 2), dim=-1)
 
     def feature_batches(self, images: Iterable[np.ndarray], count: int, progress: Optional[Progress],
