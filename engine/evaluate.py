@@ -210,12 +210,12 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
     tn = total - tp - fp - fn
 
     labels = _events(pi, pj, m)
-    found = np.unique(labels[~missed]).size
-    events_total = np.unique(labels).size
-    event_ids = np.unique(labels)
-    pair_dist = np.hypot(x[pi] - x[pj], y[pi] - y[pj])
-    event_closest = [float(pair_dist[labels == e].min()) for e in event_ids]
-    event_found = [bool(np.any(~missed[labels == e])) for e in event_ids]
+    event_ids, event_of_pair = np.unique(labels, return_inverse=True)
+    event_closest = np.full(event_ids.size, np.inf)
+    np.minimum.at(event_closest, event_of_pair, np.hypot(x[pi] - x[pj], y[pi] - y[pj]))
+    event_found = np.zeros(event_ids.size, bool)
+    event_found[event_of_pair[~missed]] = True
+    found, events_total = int(event_found.sum()), int(event_ids.size)
 
     return Evaluation(
         tp=tp, fp=fp, tn=tn, fn=fn,
@@ -224,5 +224,5 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         tp_pairs=tp_pairs, fp_pairs=fp_pairs, fn_pairs=fn_pairs,
         events_found=int(found), events_total=int(events_total),
         loop_truth=loop_truth, dist_th=float(dist_th), neighbor_node_num=nn,
-        event_closest=event_closest, event_found=event_found,
+        event_closest=event_closest.tolist(), event_found=event_found.tolist(),
     )

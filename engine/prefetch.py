@@ -31,9 +31,10 @@ def cores_left(reader_threads: int) -> int:
     Why: the descriptor's network (torch) starts a thread per core by default; beside a
     reader that keeps its own threads busy, those extra threads wait for cores the decoder
     holds. Readers whose read-ahead thread mostly waits say 0 and the network keeps every
-    core (alone, effnet-vlad describes 120 frames in 2.3 s on two threads, 3.3 s on one). Measured on the 2-minute 3840x1920 camera-like clip of
-    benchmarks/bench_video_sampling.py (two decoding threads, 2-core machine, quiet): describing
-    every second took 5.8-6.3 s with one torch thread against 6.4-6.9 s with two (three runs each).
+    core (alone, effnet-vlad describes 120 frames in 2.3 s on two threads, 3.3 s on one).
+    Measured on the 2-minute 3840x1920 camera-like clip of benchmarks/bench_video_sampling.py
+    (two decoding threads, 2-core machine, quiet): describing every second took 5.8-6.3 s with
+    one torch thread against 6.4-6.9 s with two (three runs each).
     """
     try:
         cores = len(os.sched_getaffinity(0))
