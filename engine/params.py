@@ -100,12 +100,16 @@ PARAMETERS: tuple[Parameter, ...] = (
               "one node step)",
               "chosen on the first synthetic family (seeds 0-4): 1.0 left no wrong automatic "
               "loop there, 0.9 four (views 1.0-1.4 m apart)", 0.0, 100.0),
-    Parameter("auto_distance_steps", float, 1.0, _NEW,
+    Parameter("auto_distance_steps", float, 1.1, _NEW,
               "an automatic loop's ends may instead be at most this many node steps apart, measured "
-              "by two-view geometry scaled by each end's own steps (the same place is closer than "
-              "one node step)",
-              "one node step by definition; on the first synthetic family (seeds 0-4) no loop of "
-              "up to 1.2 steps was more than 1 m apart", 0.0, 100.0),
+              "by two-view geometry scaled by each end's own steps (the same place is about one "
+              "node step)",
+              "first synthetic family (seeds 0-4): its nodes are 0.8 m apart, so the evaluation's "
+              "1 m is 1.25 steps, and the estimator is within 12 % for 95 % of its pairs: "
+              "1.25 / 1.12 = 1.1. Automatic places and false loops there are the same for any "
+              "value in 1.0-1.2 (1.3 makes a false loop); 1.1 is also that range's middle. "
+              "Chosen in the sixth round (was 1.0, one step by definition) before the second "
+              "family's seeds 31-42 were mapped", 0.0, 100.0),
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",
@@ -156,7 +160,7 @@ class MapParams:
     auto_inliers: int = 40
     auto_geometry_z: float = 3.5
     auto_step_share: float = 1.0
-    auto_distance_steps: float = 1.0
+    auto_distance_steps: float = 1.1
     auto_plane_share: float = 0.6
     place_radius: int = 4
     heading_tol: float = 35.0
