@@ -146,7 +146,6 @@ def main() -> None:
             print(f"| {way} | {layout} | {', '.join(f'{c:.3f}' for c in near)} | {unrelated:.3f} |")
 
 
-
 def small_rolls(images: dict, phases_list=(1,)) -> None:
     """How far a roll of a few columns (of WORK_WIDTH) moves the default descriptor of a real
     panorama: the network is not shift-invariant below its stride (block 10: 16 input pixels,
@@ -186,6 +185,7 @@ def small_rolls(images: dict, phases_list=(1,)) -> None:
     print("| phases | frames | consecutive pairs | unrelated max | margin (min - max) |\n|---:|---|---|---:|---:|")
     for phases, way, near, unrelated in margins:
         print(f"| {phases} | {way} | {', '.join(f'{c:.3f}' for c in near)} | {unrelated:.3f} | {min(near) - unrelated:+.3f} |")
+
 
 if __name__ == "__main__":
     main()
