@@ -21,6 +21,7 @@ side of ViT-G/14 is slow).
 from __future__ import annotations
 
 import argparse
+import resource
 import sys
 import tempfile
 import time
@@ -32,8 +33,11 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from engine.descriptors import dinov2  # noqa: E402
+from engine.descriptors.accel import compute, to_network_input  # noqa: E402
 from engine.descriptors.anyloc import AnyLocVLAD, save_vocabulary  # noqa: E402
 from engine.descriptors.efficientnet import EfficientNetVLAD  # noqa: E402
+from engine.descriptors.vlad import kmeans_cosine  # noqa: E402
+from engine.descriptors.vlad_torch import kmeans_cosine_torch  # noqa: E402
 
 MODELS = ("effnet-vlad", "anyloc-vits14", "anyloc-vitb14", "anyloc-vitg14")
 
@@ -48,6 +52,9 @@ def panoramas(n: int, height: int, seed: int = 0) -> list[np.ndarray]:
                                               size=(2 * height, 4 * height), mode="bilinear")
         out.append(big[0].permute(1, 2, 0).clamp(0, 255).byte().numpy())
     return out
+
+
+NETWORKS: dict = {}   # (backbone, device) -> loaded DINOv2: each ViT is read from disk once per device
 
 
 def make(model: str, height: int, batch: int, device: str, precision: str, workdir: Path,
@@ -65,40 +72,87 @@ def make(model: str, height: int, batch: int, device: str, precision: str, workd
     if centres is not None:
         vocab = workdir / f"{backbone}_c_centers.pt"
         save_vocabulary(vocab, centres)
-    return AnyLocVLAD(weights=str(weights), input_height=height, batch_size=batch, device=device,
-                      precision=precision, vocabulary=None if vocab is None else str(vocab))
+    d = AnyLocVLAD(weights=str(weights), input_height=height, batch_size=batch, device=device,
+                   precision=precision, vocabulary=None if vocab is None else str(vocab))
+    key = (backbone, str(d.device))
+    if key not in NETWORKS:
+        NETWORKS[key] = d.backbone()
+    d._model = NETWORKS[key]
+    return d
 
 
 def centres_of(describer) -> np.ndarray:
     return describer.vocabulary if isinstance(describer, EfficientNetVLAD) else describer.centers
 
 
+def sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize()
+
+
 def timed(describer, frames: list[np.ndarray]) -> tuple[np.ndarray, float]:
     describer.describe(iter(frames[: describer.batch_size]), describer.batch_size)   # warm-up
-    if describer.device.type == "cuda":
-        torch.cuda.synchronize()
+    sync(describer.device)
     t0 = time.perf_counter()
     out = describer.describe(iter(frames), len(frames))
-    if describer.device.type == "cuda":
-        torch.cuda.synchronize()
+    sync(describer.device)
     return out, time.perf_counter() - t0
+
+
+def network_alone(describer, frames: list[np.ndarray], reps: int = 8) -> float:
+    """Frames/s of the DINOv2 forward pass alone on one batch already on the device (NaN for effnet)."""
+    if not isinstance(describer, AnyLocVLAD):
+        return float("nan")
+    b = describer.batch_size
+    x = to_network_input(frames[:b], (describer.input_height, 2 * describer.input_height),
+                         describer.size, describer.device, "bench")
+    net = describer.backbone()
+    with compute(describer.device, describer.dtype):
+        net.extract(x, describer.layer, describer.facet)
+        sync(describer.device)
+        t0 = time.perf_counter()
+        for _ in range(reps):
+            net.extract(x, describer.layer, describer.facet)
+        sync(describer.device)
+    return reps * b / (time.perf_counter() - t0)
+
+
+def kmeans_agreement(device: torch.device, rows: int, dim: int, k: int = 32) -> str:
+    """One line: the map vocabulary's k-means on the CPU (numpy) and on ``device``, time and largest
+    centre difference, on clustered random unit rows."""
+    rng = np.random.default_rng(0)
+    x = (rng.standard_normal((4 * k, dim))[rng.integers(0, 4 * k, rows)]
+         + 0.7 * rng.standard_normal((rows, dim))).astype(np.float32)
+    t0 = time.perf_counter()
+    cpu = kmeans_cosine(x, k)
+    t_cpu = time.perf_counter() - t0
+    if device.type != "cuda":
+        return f"k-means {rows} x {dim}, k {k}: CPU {t_cpu:.1f} s (no CUDA device here)"
+    kmeans_cosine_torch(x[:k * 4], k, device)   # warm-up
+    sync(device)
+    t0 = time.perf_counter()
+    dev = kmeans_cosine_torch(x, k, device)
+    t_dev = time.perf_counter() - t0
+    return (f"k-means {rows} x {dim}, k {k}: CPU (numpy float64) {t_cpu:.1f} s, {device.type} "
+            f"(torch float64) {t_dev:.2f} s, largest centre difference {np.abs(cpu - dev).max():.2e}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", nargs="+", default=None, choices=MODELS)
     ap.add_argument("--height", type=int, default=None, help="input height (width = 2 x); default 224, 112 with --cpu-small")
-    ap.add_argument("--frames", type=int, default=None, help="frames timed (default 128, 8 with --cpu-small)")
+    ap.add_argument("--frames", type=int, default=None, help="frames timed (default 256, 8 with --cpu-small)")
     ap.add_argument("--agree-frames", type=int, default=None, help="frames compared CPU vs device (default 8, 4 with --cpu-small)")
-    ap.add_argument("--batch", type=int, default=16)
+    ap.add_argument("--batch", type=int, default=32)
     ap.add_argument("--precisions", nargs="+", default=["float32", "bfloat16"])
     ap.add_argument("--device", default="auto")
+    ap.add_argument("--kmeans-rows", type=int, default=None, help="rows of the k-means check (default 100000, 4000 with --cpu-small)")
     ap.add_argument("--cpu-small", action="store_true", help="CPU-sized run: 112 px, ViT-S/B only, few frames")
     args = ap.parse_args()
     small = args.cpu_small
     models = args.models or (["effnet-vlad", "anyloc-vits14", "anyloc-vitb14"] if small else list(MODELS))
     height = args.height or (112 if small else 224)
-    n_frames = args.frames or (8 if small else 128)
+    n_frames = args.frames or (8 if small else 256)
     n_agree = args.agree_frames or (4 if small else 8)
     batch = min(args.batch, 4) if small else args.batch
     device = torch.device("cuda" if args.device == "auto" and torch.cuda.is_available() else
@@ -111,6 +165,7 @@ def main() -> None:
             reference = None
             for precision in args.precisions:
                 d = make(model, height, batch, str(device), precision, Path(tmp))
+                alone = network_alone(d, frames)
                 out, dt = timed(d, frames[:n_frames])
                 if reference is None:   # CPU float32 on the agreement frames, once per model
                     ref = make(model, height, batch, "cpu", "float32", Path(tmp))
@@ -123,17 +178,27 @@ def main() -> None:
                 mine = make(model, height, batch, str(device), precision, Path(tmp))
                 cos = np.sum(reference * mine.describe(iter(frames[:n_agree]), n_agree), axis=1)
                 fixed = make(model, height, batch, str(device), precision, Path(tmp), centres=ref_centres)
+                _, dt_fixed = timed(fixed, frames[:n_frames])
                 cos_fixed = np.sum(reference_fixed * fixed.describe(iter(frames[:n_agree]), n_agree), axis=1)
-                rows.append((model, precision, d.settings().get("precision", precision), n_frames / dt,
+                rows.append((model, precision, d.settings().get("precision", precision), alone,
+                             n_frames / dt, n_frames / dt_fixed,
                              cos.min(), np.median(cos), cos_fixed.min(), np.median(cos_fixed), out.shape[1]))
-                print(f"  {model} {precision}: {n_frames / dt:.1f} frames/s", file=sys.stderr)
+                print(f"  {model} {precision}: network {alone:.1f}, describe {n_frames / dt:.1f} (map vocabulary), "
+                      f"{n_frames / dt_fixed:.1f} (given vocabulary) frames/s", file=sys.stderr, flush=True)
+            NETWORKS.clear()
+    kmeans_line = kmeans_agreement(device, args.kmeans_rows or (4000 if small else 100_000), 1536)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     print(f"Device: {name}; torch {torch.__version__}; input {height} x {2 * height}; batch {batch}; "
-          f"{n_frames} frames timed, {n_agree} compared with CPU float32 (random weights, map vocabulary)\n")
-    print("| model | precision | ran as | frames/s | cos vs CPU fp32, own map vocabulary: min / median "
+          f"{n_frames} frames timed, {n_agree} compared with CPU float32 (random weights)\n")
+    print("| model | precision | ran as | network alone, frames/s | describe, map vocabulary (k-means included), frames/s "
+          "| describe, given vocabulary, frames/s | cos vs CPU fp32, own map vocabulary: min / median "
           "| same vocabulary: min / median | dim |")
-    print("|---|---|---|---:|---:|---:|---:|")
-    for model, asked, ran, fps, cmin, cmed, fmin, fmed, dim in rows:
-        print(f"| {model} | {asked} | {ran} | {fps:.1f} | {cmin:.4f} / {cmed:.4f} | {fmin:.4f} / {fmed:.4f} | {dim} |")
+    print("|---|---|---|---:|---:|---:|---:|---:|---:|")
+    for model, asked, ran, alone, fps, fps_fixed, cmin, cmed, fmin, fmed, dim in rows:
+        net = "-" if alone != alone else f"{alone:.1f}"
+        print(f"| {model} | {asked} | {ran} | {net} | {fps:.1f} | {fps_fixed:.1f} | {cmin:.4f} / {cmed:.4f} "
+              f"| {fmin:.4f} / {fmed:.4f} | {dim} |")
+    print(f"\n{kmeans_line}\nPeak host memory (max RSS) of the whole run: {peak:.1f} GiB")
 
 
 if __name__ == "__main__":

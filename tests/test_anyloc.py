@@ -287,7 +287,8 @@ def test_preprocess_keeps_the_whole_panorama_and_normalises():
 
 def test_vlad_map_vocabulary_gives_32_x_384_unit_rows(ckpt, vits, tmp_path):
     saved = tmp_path / "c_centers.pt"
-    model = AnyLocVLAD(backbone="vits14", weights=ckpt, input_height=H, save_vocabulary=str(saved))
+    # On the CPU: on CUDA "auto" runs a file vocabulary in bfloat16 (test_gpu_arithmetic checks that).
+    model = AnyLocVLAD(backbone="vits14", weights=ckpt, input_height=H, save_vocabulary=str(saved), device="cpu")
     stages = []
     out = model.describe(iter(images(4)), 4, progress=lambda d, t, s: stages.append((d, t, s)))
     assert out.shape == (4, 32 * 384) and out.dtype == np.float32
@@ -297,7 +298,7 @@ def test_vlad_map_vocabulary_gives_32_x_384_unit_rows(ckpt, vits, tmp_path):
     # The saved map vocabulary, loaded as a file, reproduces the same descriptors (up to the
     # float16 storage of the patch features while the map vocabulary is built).
     again = AnyLocVLAD(backbone="vits14", weights=ckpt, input_height=H, vocabulary=str(saved),
-                       batch_size=3)
+                       batch_size=3, device="cpu")
     assert np.allclose(again.describe(iter(images(4)), 4), out, atol=2e-3)
     assert again.settings()["vocabulary"].startswith("c_centers.pt:")
 
@@ -311,7 +312,7 @@ def test_vlad_with_file_vocabulary_equals_manual_pipeline(ckpt, vits, tmp_path):
     assert torch.load(path, weights_only=True).shape == (32, 384)           # AnyLoc's format
     imgs = images(3)
     out = AnyLocVLAD(backbone="vits14", weights=ckpt, input_height=H, vocabulary=str(path),
-                     batch_size=2).describe(iter(imgs), 3)
+                     batch_size=2, device="cpu").describe(iter(imgs), 3)
     with torch.no_grad():
         feats = F.normalize(vits.extract(torch.from_numpy(np.stack([preprocess(i, H) for i in imgs])), 10, "value"), dim=-1)
     manual = np.stack([anyloc_vlad(f.numpy(), centers) for f in feats])

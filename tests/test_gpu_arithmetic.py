@@ -10,11 +10,11 @@ import pytest
 import torch
 
 from engine.descriptors import mapvocab
-from engine.descriptors.accel import compute, resize, resolve_precision, shrink_on_host, to_network_input
+from engine.descriptors.accel import compute, resize, resolve_precision, shrink_on_host, to_network_input, upload
 from engine.descriptors.anyloc import anyloc_vlad
 from engine.descriptors.efficientnet import EfficientNetVLAD, sector_vlad, sector_weights
 from engine.descriptors.vlad import kmeans_cosine, vlad
-from engine.descriptors.vlad_torch import sector_vlad_batch, vlad_batch
+from engine.descriptors.vlad_torch import kmeans_cosine_torch, kmeans_on, sector_vlad_batch, vlad_batch
 from engine.errors import InputError
 
 
@@ -152,3 +152,81 @@ def test_sample_rows_is_the_seeded_uniform_sample_of_all_rows():
     pick = np.sort(np.random.default_rng(9).choice(16, 6, replace=False))
     assert np.array_equal(mapvocab.sample_rows(parts, 6, seed=9), whole[pick])
     assert np.array_equal(mapvocab.sample_rows(parts, 100, seed=9), whole)
+
+
+# ---- the map vocabulary's k-means on the device (vlad_torch.kmeans_cosine_torch), checked on the CPU
+
+def clustered(rng, n: int, dim: int, groups: int) -> np.ndarray:
+    centres = unit_rows(rng, (groups, dim))
+    return centres[rng.integers(0, groups, n)] + 0.3 * rng.normal(size=(n, dim)).astype(np.float32)
+
+
+def test_torch_kmeans_gives_the_numpy_centres():
+    rng = np.random.default_rng(5)
+    feats = clustered(rng, 4000, 48, 40)
+    ref = kmeans_cosine(feats, 32, seed=2)
+    got = kmeans_cosine_torch(feats, 32, torch.device("cpu"), seed=2, chunk=999)   # chunks need not divide
+    assert np.allclose(got, ref, atol=1e-6)
+
+
+def test_torch_kmeans_reseeds_empty_clusters_as_numpy_does():
+    # Ten distinct rows repeated: twelve clusters cannot all keep members, so empty ones are
+    # re-seeded with the worst-represented rows on both sides.
+    rng = np.random.default_rng(6)
+    feats = np.repeat(unit_rows(rng, (10, 8)), 30, axis=0)
+    ref = kmeans_cosine(feats, 12, seed=0)
+    got = kmeans_cosine_torch(feats, 12, torch.device("cpu"), seed=0)
+    assert np.allclose(got, ref, atol=1e-6)
+
+
+def test_kmeans_on_the_cpu_is_the_numpy_reference():
+    feats = clustered(np.random.default_rng(7), 500, 16, 8)
+    assert np.array_equal(kmeans_on(torch.device("cpu"), feats, 8, seed=1), kmeans_cosine(feats, 8, seed=1))
+
+
+def test_pooled_rows_are_the_same_however_often_they_are_copied_to_the_host(monkeypatch):
+    rng = np.random.default_rng(8)
+    batches = [torch.from_numpy(unit_rows(rng, (2, 30, 8))) for _ in range(5)]
+    centres = unit_rows(rng, (4, 8))
+    monkeypatch.setattr(mapvocab, "ROWS_ON_DEVICE_BYTES", 1)          # a copy per batch
+    each, _ = mapvocab.pool_recording(iter(batches), vlad_batch, torch.device("cpu"), centers=centres)
+    monkeypatch.setattr(mapvocab, "ROWS_ON_DEVICE_BYTES", 1 << 30)    # one copy at the end
+    once, _ = mapvocab.pool_recording(iter(batches), vlad_batch, torch.device("cpu"), centers=centres)
+    assert each.shape == (10, 32) and np.array_equal(each, once)
+
+
+def test_upload_stacks_frames_as_they_are():
+    rng = np.random.default_rng(9)
+    frames = [rng.integers(0, 256, (4, 6, 3), dtype=np.uint8) for _ in range(3)]
+    assert np.array_equal(upload(frames, torch.device("cpu")).numpy(), np.stack(frames))
+    floats = [f.astype(np.float32) for f in frames]
+    assert np.array_equal(upload(floats, torch.device("cpu")).numpy(), np.stack(floats))
+
+
+# ---- on a CUDA device only (CI has none; the tests above check the same arithmetic on the CPU)
+
+cuda_only = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+
+
+@cuda_only
+def test_cuda_kmeans_gives_the_cpus_centres():
+    feats = clustered(np.random.default_rng(10), 20000, 256, 64)
+    ref = kmeans_cosine(feats, 32, seed=0)
+    got = kmeans_on(torch.device("cuda"), feats, 32, seed=0)
+    assert np.allclose(got, ref, atol=1e-5)
+
+
+@cuda_only
+def test_cuda_float32_describe_agrees_with_the_cpu(frames, tmp_path):
+    from engine.descriptors import dinov2
+    from engine.descriptors.anyloc import AnyLocVLAD
+
+    weights = tmp_path / "dinov2_vits14_pretrain.pth"
+    torch.save(dinov2.random_dinov2("vits14", seed=1).state_dict(), weights)
+    rows = {dev: AnyLocVLAD(weights=str(weights), input_height=112, device=dev, precision="float32",
+                            num_clusters=8).describe(iter(frames), len(frames)) for dev in ("cpu", "cuda")}
+    cos = np.sum(rows["cpu"] * rows["cuda"], axis=1)
+    assert cos.min() > 0.9999
+    effnet = {dev: EfficientNetVLAD(input_height=64, vocabulary_size=16, device=dev, precision="float32")
+              .describe(iter(frames), len(frames)) for dev in ("cpu", "cuda")}
+    assert np.sum(effnet["cpu"] * effnet["cuda"], axis=1).min() > 0.9999

@@ -151,8 +151,8 @@ def test_megaloc_formats_give_the_same_descriptors(megaloc_tiny):
 
 def test_boq_gives_12288_unit_rows_and_batches_do_not_matter(boq_tiny):
     imgs = panoramas(3)
-    one = BoQ(weights=boq_tiny, input_height=H, batch_size=1).describe(iter(imgs), 3)
-    three = BoQ(weights=boq_tiny, input_height=H, batch_size=3).describe(iter(imgs), 3)
+    one = BoQ(weights=boq_tiny, input_height=H, batch_size=1, device="cpu").describe(iter(imgs), 3)
+    three = BoQ(weights=boq_tiny, input_height=H, batch_size=3, device="cpu").describe(iter(imgs), 3)
     assert one.shape == (3, 12288) and np.allclose(np.linalg.norm(one, axis=1), 1.0, atol=1e-5)
     assert np.allclose(one, three, atol=1e-5)
 

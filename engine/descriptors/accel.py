@@ -162,6 +162,22 @@ def shrink_on_host(images: Sequence[np.ndarray], size: tuple[int, int]) -> Optio
     return out
 
 
+def upload(images: Sequence[np.ndarray], device: torch.device) -> torch.Tensor:
+    """uint8 (B, h, w, 3) on ``device`` from frames of one shape.
+
+    On CUDA the frames are stacked straight into page-locked memory: a copy from ordinary
+    (pageable) memory waits for the work already queued on the GPU, a page-locked one does not,
+    so the host can stack the next batch while the network runs on this one.
+    """
+    if images[0].dtype != np.uint8:   # not the usual frames: stacked as they are
+        return torch.from_numpy(np.stack(images)).to(device)
+    shape = (len(images),) + images[0].shape
+    pinned = device.type == "cuda"
+    raw = torch.empty(shape, dtype=torch.uint8, pin_memory=pinned)
+    np.stack(images, out=raw.numpy())
+    return raw.to(device, non_blocking=pinned)
+
+
 def to_network_input(images: Sequence[np.ndarray], size: tuple[int, int], crop: tuple[int, int],
                      device: torch.device, who: str,
                      mean: Sequence[float] = IMAGENET_MEAN, std: Sequence[float] = IMAGENET_STD) -> torch.Tensor:
@@ -189,8 +205,7 @@ def to_network_input(images: Sequence[np.ndarray], size: tuple[int, int], crop: 
             if shrunk is not None:
                 x = torch.from_numpy(shrunk).permute(0, 3, 1, 2).div_(255.0)
             else:
-                raw = torch.from_numpy(np.ascontiguousarray(np.stack(images[start:stop])))
-                x = raw.to(device, non_blocking=True).permute(0, 3, 1, 2).float().div_(255.0)
+                x = upload(images[start:stop], device).permute(0, 3, 1, 2).float().div_(255.0)
                 x = resize(x, size)
             x = x[:, :, top:top + crop[0], left:left + crop[1]]
             out[start:stop] = (x - m) / s

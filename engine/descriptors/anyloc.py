@@ -31,8 +31,8 @@ from .accel import (check_precision, compute, full_precision, pick_device, resol
                     to_network_input)
 from .base import DescriptorModel, in_batches
 from .mapvocab import pool_recording, sample_rows
-from .vlad import kmeans_cosine, l2_normalize, vlad
-from .vlad_torch import vlad_batch
+from .vlad import l2_normalize, vlad
+from .vlad_torch import kmeans_on, vlad_batch
 
 # Layer per backbone when the user sets none: the layers AnyLoc's paper compares the ViTs at
 # (its ablation over layers picked 31 of 40 for ViT-G, 20 of 24 for ViT-L, 10 of 12 for S and B).
@@ -318,14 +318,14 @@ class AnyLocVLAD(_AnyLocBase):
     def describe(self, images: Iterable[np.ndarray], count: int,
                  progress: Optional[Progress] = None,
                  cancel: Optional[CancelToken] = None) -> np.ndarray:
-        # VLAD runs on the device; a map vocabulary is clustered (float64, CPU) from a seeded
+        # VLAD runs on the device; a map vocabulary is clustered (float64, CPU or CUDA) from a seeded
         # sample of the first frames' features held on the host (bounded, see mapvocab).
         batches = self.patch_features(images, count, progress, cancel, "AnyLoc: DINOv2 features")
 
         def build(parts: list[np.ndarray]) -> np.ndarray:
             check(cancel)
             report(progress, 0, 1, "AnyLoc: vocabulary (k-means)")
-            centers = kmeans_cosine(self._vocabulary_sample(parts), self.num_clusters)
+            centers = kmeans_on(self.device, self._vocabulary_sample(parts), self.num_clusters)
             if self.save_vocabulary_to:
                 save_vocabulary(self.save_vocabulary_to, centers)
             report(progress, 1, 1, "AnyLoc: vocabulary (k-means)")

@@ -45,7 +45,7 @@ import numpy as np
 from ..errors import InputError
 from ..progress import CancelToken, Progress, check, report
 from .base import DescriptorModel, in_batches
-from .vlad import _assign, kmeans_cosine, l2_normalize, vlad
+from .vlad import _assign, l2_normalize, vlad
 
 if TYPE_CHECKING:
     import torch
@@ -326,10 +326,11 @@ class EfficientNetVLAD(DescriptorModel):
     def build_vocabulary(self, local: list[np.ndarray]) -> np.ndarray:
         """k-means (cosine) centres from a deterministic sample of the local features."""
         from .mapvocab import sample_rows
+        from .vlad_torch import kmeans_on
 
         feats = sample_rows(local, VOCAB_SAMPLE, self.seed)
         if feats.shape[0] < self.vocabulary_size:
             raise InputError(
                 f"effnet-vlad: too few local features ({feats.shape[0]}) for {self.vocabulary_size} clusters"
             )
-        return kmeans_cosine(feats, self.vocabulary_size, seed=self.seed)
+        return kmeans_on(self.device, feats, self.vocabulary_size, seed=self.seed)

@@ -6,8 +6,10 @@ each batch is pooled there at once and only its rows reach the host. With a map
 vocabulary (k-means on the recording's own features) the first frames' features are
 buffered on the host as float16 until the recording ends or the buffer reaches
 ``budget_bytes``; the vocabulary is then clustered from a seeded sample of the buffer
-(``vlad.kmeans_cosine``, float64 on the CPU), the buffer is pooled and freed, and every
-later batch is pooled as it comes.
+(``vlad_torch.kmeans_on``: float64, on the GPU where the features were made on CUDA), the
+buffer is pooled and freed, and every later batch is pooled as it comes. Pooled rows wait on
+the device until ``ROWS_ON_DEVICE_BYTES`` gather: a copy to the host waits for the device, and
+one wait per ~330 ViT-G/14 rows lets the host prepare the next batches meanwhile.
 
 Host memory for local features is therefore at most ``budget_bytes`` plus one batch
 (default 1 GiB: ~38,000 frames of the default effnet-vlad at 128 px, 28 kB each; ~680 frames
@@ -26,6 +28,7 @@ from ..progress import CancelToken, check
 from .vlad_torch import as_centers
 
 BUDGET_BYTES = 1 << 30
+ROWS_ON_DEVICE_BYTES = 64 << 20
 
 Pool = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
@@ -58,9 +61,20 @@ def pool_recording(batches: Iterable[torch.Tensor], pool: Pool, device: torch.de
     """
     budget = BUDGET_BYTES if budget_bytes is None else int(budget_bytes)
     rows: list[np.ndarray] = []
+    pending: list[torch.Tensor] = []   # pooled rows not yet copied to the host
     buffer: list[np.ndarray] = []
     held = 0
     c = None if centers is None else as_centers(centers, device)
+
+    def keep(pooled: torch.Tensor) -> None:
+        pending.append(pooled)
+        if sum(p.numel() * p.element_size() for p in pending) >= ROWS_ON_DEVICE_BYTES:
+            drain()
+
+    def drain() -> None:
+        if pending:
+            rows.append(torch.cat(pending).cpu().numpy())
+            pending.clear()
 
     def flush() -> None:
         nonlocal c, held, centers
@@ -69,14 +83,14 @@ def pool_recording(batches: Iterable[torch.Tensor], pool: Pool, device: torch.de
         for part in buffer:
             check(cancel)
             with torch.inference_mode():
-                rows.append(pool(torch.from_numpy(part).to(device).float(), c).cpu().numpy())
+                keep(pool(torch.from_numpy(part).to(device).float(), c))
         buffer.clear()
         held = 0
 
     for feats in batches:
         if c is not None:
             with torch.inference_mode():
-                rows.append(pool(feats, c).cpu().numpy())
+                keep(pool(feats, c))
             continue
         part = feats.to(torch.float16).cpu().numpy()
         buffer.append(part)
@@ -85,5 +99,6 @@ def pool_recording(batches: Iterable[torch.Tensor], pool: Pool, device: torch.de
             flush()
     if c is None and buffer:
         flush()
+    drain()
     out = np.concatenate(rows).astype(np.float32) if rows else None
     return out, centers
