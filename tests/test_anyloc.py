@@ -167,6 +167,23 @@ def test_positional_embedding_interpolation_keeps_row_and_column_layout(vits):
     assert torch.all(grid[1:, 0] > grid[:-1, 0])                         # increasing downwards
 
 
+
+def test_the_kept_positional_embedding_follows_the_weights():
+    # Inference mode keeps the last grid's embedding; weights changed in place must not be
+    # served stale, and what is kept equals what would be computed afresh.
+    model = dinov2.random_dinov2("vits14", seed=4)
+    with torch.no_grad():
+        fresh = model.interpolate_pos_encoding(4, 8).clone()
+    with torch.inference_mode():
+        first = model.interpolate_pos_encoding(4, 8)
+        assert model.interpolate_pos_encoding(4, 8) is first and torch.equal(first, fresh)
+    with torch.no_grad():
+        model.pos_embed.mul_(2.0)
+    with torch.inference_mode():
+        assert torch.allclose(model.interpolate_pos_encoding(4, 8), 2.0 * fresh, atol=1e-6)
+        assert model.interpolate_pos_encoding(2, 8).shape == (1, 1 + 16, 384)
+
+
 # ---------------------------------------------------------------- checkpoints and errors
 
 def test_missing_weights_name_the_file_and_the_option():

@@ -193,8 +193,6 @@ def to_network_input(images: Sequence[np.ndarray], size: tuple[int, int], crop: 
     out = torch.empty((len(images), 3, crop[0], crop[1]), dtype=torch.float32, device=device)
     top = int(round((size[0] - crop[0]) / 2.0))   # centre crop, rounded as torchvision does
     left = int(round((size[1] - crop[1]) / 2.0))
-    m = torch.tensor(mean, dtype=torch.float32, device=device).view(1, 3, 1, 1)
-    s = torch.tensor(std, dtype=torch.float32, device=device).view(1, 3, 1, 1)
     with full_precision(device):
         start = 0
         while start < len(images):
@@ -208,6 +206,9 @@ def to_network_input(images: Sequence[np.ndarray], size: tuple[int, int], crop: 
                 x = upload(images[start:stop], device).permute(0, 3, 1, 2).float().div_(255.0)
                 x = resize(x, size)
             x = x[:, :, top:top + crop[0], left:left + crop[1]]
-            out[start:stop] = (x - m) / s
+            # Per channel with Python floats: a mean/std tensor copied to CUDA would wait for
+            # the batches already queued there (a blocking copy synchronises the stream).
+            for ch in range(3):
+                out[start:stop, ch] = (x[:, ch] - float(mean[ch])) / float(std[ch])
             start = stop
     return out

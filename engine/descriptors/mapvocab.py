@@ -8,8 +8,9 @@ buffered on the host as float16 until the recording ends or the buffer reaches
 ``budget_bytes``; the vocabulary is then clustered from a seeded sample of the buffer
 (``vlad_torch.kmeans_on``: float64, on the GPU where the features were made on CUDA), the
 buffer is pooled and freed, and every later batch is pooled as it comes. Pooled rows wait on
-the device until ``ROWS_ON_DEVICE_BYTES`` gather: a copy to the host waits for the device, and
-one wait per ~330 ViT-G/14 rows lets the host prepare the next batches meanwhile.
+the device for ``BATCHES_AHEAD`` batches (or ``ROWS_ON_DEVICE_BYTES``): a copy to the host
+waits for the device, and one wait per few batches lets the host stack the next frames while
+the network runs; it also bounds how far the host runs ahead (page-locked input per batch).
 
 Host memory for local features is therefore at most ``budget_bytes`` plus one batch
 (default 1 GiB: ~38,000 frames of the default effnet-vlad at 128 px, 28 kB each; ~680 frames
@@ -29,6 +30,7 @@ from .vlad_torch import as_centers
 
 BUDGET_BYTES = 1 << 30
 ROWS_ON_DEVICE_BYTES = 64 << 20
+BATCHES_AHEAD = 4
 
 Pool = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 
@@ -68,7 +70,8 @@ def pool_recording(batches: Iterable[torch.Tensor], pool: Pool, device: torch.de
 
     def keep(pooled: torch.Tensor) -> None:
         pending.append(pooled)
-        if sum(p.numel() * p.element_size() for p in pending) >= ROWS_ON_DEVICE_BYTES:
+        if (len(pending) >= BATCHES_AHEAD
+                or sum(p.numel() * p.element_size() for p in pending) >= ROWS_ON_DEVICE_BYTES):
             drain()
 
     def drain() -> None:

@@ -34,7 +34,9 @@ def _residual_sums(features: torch.Tensor, centers: torch.Tensor, labels: torch.
     """
     b, n, c = features.shape
     k = centers.shape[0]
-    onehot = F.one_hot(labels, k).to(features.dtype)                 # (B, N, k)
+    # scatter, not F.one_hot: one_hot checks the labels' range on the host, a wait for the device
+    onehot = torch.zeros(b, n, k, dtype=features.dtype, device=features.device)
+    onehot.scatter_(2, labels.unsqueeze(2), 1.0)                     # (B, N, k)
     resid = features - centers[labels]                               # (B, N, C)
     if weights is None:
         return onehot.transpose(1, 2) @ resid                        # (B, k, C)
