@@ -159,7 +159,7 @@ def main() -> int:
             seeds = [int(s) for s in seeds.split(",")]
             rows = run(seeds, ALL_METHODS, cache, args.input_height)
             parts.append(f"## {label} {seeds}\n\n" + summary_table(rows, ALL_METHODS, ROUTE_TYPES) + "\n\n<details><summary>"
-                         f"per route type and look</summary>\n\n" + look_table(rows, ALL_METHODS)
+                         "per route type and look</summary>\n\n" + look_table(rows, ALL_METHODS)
                          + "\n\n</details>\n\n<details><summary>per recording</summary>\n\n"
                          + markdown_table(rows) + "\n\n</details>\n")
         text = (f"Descriptor cache: {cache} (one descriptor and panorama-shift version per cache).\n\n"

@@ -17,7 +17,6 @@ Here every question is answered with memory bounded whatever n:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Optional
 

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import networkx as nx
 import numpy as np
-import pytest
 
 from engine.graph import TopoMap
 from engine.params import MapParams

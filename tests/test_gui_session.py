@@ -10,7 +10,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import networkx as nx
-import numpy as np
 import pytest
 
 pytest.importorskip("pytestqt")

@@ -49,7 +49,6 @@ def test_a_consumer_that_stops_early_stops_the_thread_and_closes_the_reader():
     assert not any(t.name == "panotopo-read-ahead" for t in threading.enumerate())
 
 
-
 def test_cancelling_a_video_describe_stops_reading_before_the_call_returns(tmp_path):
     import numpy as np
 

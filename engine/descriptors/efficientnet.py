@@ -43,7 +43,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError
-from ..progress import CancelToken, Progress, check, report
+from ..progress import CancelToken, Progress, check
 from .base import DescriptorModel, in_batches
 from .vlad import _assign, l2_normalize, vlad
 

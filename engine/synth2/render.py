@@ -124,7 +124,6 @@ def render_view(world: World, x: float, y: float, yaw: float, lap: int, width: i
     level = np.zeros((height, width), np.float32)
     shade = np.ones((height, width), np.float32)
 
-    wall = (hgt >= 0) & (hgt <= top[None])
     wv = 1.0 - np.mod(hgt / world.tile_h, 1.0)
     mx[:] = (MARGIN + u_frac * TILE_W)[None]
     my[:] = tile[None] * _ROW + MARGIN + wv * (TILE_H - 1)
