@@ -349,13 +349,6 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     ``auto_plane_share`` of the inliers lie on one plane: a flat picture copied elsewhere (a
     poster, a printed facade, a repeated wall texture) fits two views as well as the place
     does; a revisit sees things at several depths.
-    The score such a loop needs is ``auto_geometry_z``, or only ``candidate_z`` (the queue's
-    own gate) where its two views *measure* within ``auto_distance_steps``: the score is the
-    guard against geometry fooled by a repeated scene, and a distance that two independent
-    step triangulations agree on is harder to fool than an inlier count (seventh round: on the
-    first family, seeds 0-4 and 300-301, no place and no false loop changed, 6 candidates
-    became automatic loops, all true; on the second family's seen seeds 37-42, 4 of the 10
-    places left with a low score had two views measured 0.46-0.98 steps apart at z 3.1-3.4).
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
@@ -375,9 +368,7 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
 
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    measured_close = apart <= params.auto_distance_steps                              # NaN: no
-    auto = ((geo_strong & ((c.score >= params.auto_geometry_z)
-                           | (measured_close & (c.score >= params.candidate_z))))
+    auto = ((geo_strong & (c.score >= params.auto_geometry_z))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))

@@ -89,8 +89,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "the probe of issue 13 (false pairs at most 40 outdoors); chosen on the first family",
               0, 100_000),
     Parameter("auto_geometry_z", float, 3.5, _NEW,
-              "calibrated score for an automatic loop that geometry confirms by its inliers "
-              "(one whose two views measure within auto_distance_steps needs candidate_z)",
+              "calibrated score for an automatic loop that geometry confirms",
               "first synthetic family (seeds 0-4): automatic loops are the same for any value in "
               "3-4; the middle. Chosen after the second family's seeds 3-4 showed three wrong "
               "automatic loops at 3.0-3.3 (a poster repeated 20 m down a corridor), so those seeds "

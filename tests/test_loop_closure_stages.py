@@ -53,17 +53,6 @@ def test_views_measured_closer_than_one_node_step_are_one_place_though_they_shar
     assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
 
 
-
-def test_views_measured_within_a_step_need_only_the_queues_score():
-    # Strong geometry at a score between candidate_z and auto_geometry_z: automatic where the
-    # two views measure within a step, left to a person where only the inliers vouch for it.
-    strong = P.auto_inliers * 3
-    z = (P.candidate_z + P.auto_geometry_z) / 2
-    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[z, z, P.candidate_z - 0.1], inliers=[strong] * 3,
-                ratio=[0.8] * 3, step=[strong - 1] * 3, confidence=[P.candidate_confidence + 10] * 3)
-    c.distance_steps = np.array([0.5 * P.auto_distance_steps, np.nan, 0.5 * P.auto_distance_steps])
-    assert tiers(c, P).tolist() == ["auto", "candidate", ""]
-
 def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much_they_share():
     # An offset return 1.4 m to the side can share as many inliers as a step; where the
     # distance is measured, it decides.
