@@ -380,25 +380,15 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     the pair one node beside it (on either end or both) whose two views measure closest
     (``distance_steps``), when that pair passes stage 7 by its measured distance (score,
     inliers, plane share and at most ``auto_distance_steps`` apart); it then is that pair.
-    Where no pair beside it passes, the search walks on to the neighbour that measures closer
-    than the pair it stands on (with ``auto_inliers``), and looks again, at most
-    ``place_radius`` times: the radius within which stage 4 chose this pair as its place's one.
 
     Stage 4 keeps of each place the pair with the best descriptor evidence, but where two
     paths only touch (a crossing, a return offset to one side) the two views closest in
     space can be one node beside it, and only they are one place. The move is judged by the
     measured distance alone: moving to the neighbour with the most inliers instead (tried in
     the third round) made 3 false loops on the first family, pairs one step along a shared
-    stretch sharing more than a step does. On the first family (seeds 0-4) the one-node move
-    closed one more place and made no false loop. The walk (seventh round) is for crossings
-    whose best-scored pair lies two or more nodes from the closest one (after the
-    sixth round, 13 of the places left on the second family's seeds 31-42 were suppressed so);
-    it needs no number of its own, since every step must measure closer. On the first family
-    it found the same 42 of 50 places with no false loop, and 55 fewer candidates went to a
-    person (135 -> 80: pairs on shared stretches that now stand as automatic loops one or two
-    nodes over, every one of them a true revisit); on its held-out seeds 300-301 the same
-    18 of 20, 63 -> 43 candidates. Costs up to eight more two-view fits per such match and
-    step (cached with the others)."""
+    stretch sharing more than a step does. On the first family (seeds 0-4) this stage closed
+    one more place and made no false loop. Costs up to eight more two-view fits per such
+    match (cached with the others)."""
     m = node_rows.size
     todo = np.flatnonzero((status != "auto") & (c.inliers >= params.auto_inliers))
     if features is None or todo.size == 0:
@@ -406,56 +396,26 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     da, db = (d.ravel() for d in np.meshgrid([-1, 0, 1], [-1, 0, 1]))
     beside = (da != 0) | (db != 0)
     da, db = da[beside], db[beside]
-    c, status = c.take(np.arange(len(c))), status.copy()
-    centre_a, centre_b = c.a[todo].copy(), c.b[todo].copy()
-    here = np.where(np.isfinite(c.distance_steps[todo]), c.distance_steps[todo], np.inf)
-    active = np.ones(todo.size, bool)
-    taken = set(zip(c.a.tolist(), c.b.tolist()))   # two walks never end on one pair
-    for _ in range(max(int(params.place_radius), 1)):
-        walking = np.flatnonzero(active)
-        if walking.size == 0:
-            break
-        na, nb = (centre_a[walking, None] + da).ravel(), (centre_b[walking, None] + db).ravel()
-        owner = np.repeat(walking, da.size)
-        ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
-        n = _measured(na[ok], nb[ok], v, stats, features, node_rows, shifts, frame_width, params, cache)
-        owner = owner[ok]
-        close = tiers(n, params, share_steps=False) == "auto"      # by the measured distance alone
-        dist = np.where(np.isfinite(n.distance_steps) & (n.inliers >= params.auto_inliers),
-                        n.distance_steps, np.inf)
-        for k in walking:
-            mine = np.flatnonzero(owner == k)
-            passing = [j for j in mine[close[mine]] if (int(n.a[j]), int(n.b[j])) not in taken]
-            if passing:
-                j = min(passing, key=lambda q: n.distance_steps[q])
-                taken.add((int(n.a[j]), int(n.b[j])))
-                _move(c, todo[k], n, j)
-                status[todo[k]] = "auto"
-                active[k] = False
-            elif mine.size and dist[mine].min() < here[k]:
-                j = mine[np.argmin(dist[mine])]
-                centre_a[k], centre_b[k], here[k] = n.a[j], n.b[j], dist[j]
-            else:
-                active[k] = False
-    return c, status
-
-
-def _measured(a: np.ndarray, b: np.ndarray, v: np.ndarray, stats, features, node_rows: np.ndarray,
-              shifts: np.ndarray, frame_width: int, params: MapParams, cache: dict) -> Matches:
-    """Stages 2, 3, 5 and 6 of the node pairs (a, b): a ``Matches`` with all their evidence."""
-    cos, score = calibrate(v, stats, a, b)
-    n = Matches(a=a, b=b, cosine=cos, score=score)
-    n.support, n.direction = support(v, stats, a, b, params)
+    na, nb = (c.a[todo, None] + da).ravel(), (c.b[todo, None] + db).ravel()
+    owner = np.repeat(todo, da.size)
+    ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
+    na, nb, owner = na[ok], nb[ok], owner[ok]
+    cos, score = calibrate(v, stats, na, nb)
+    n = Matches(a=na, b=nb, cosine=cos, score=score)
+    n.support, n.direction = support(v, stats, na, nb, params)
     measure(n, features, node_rows, shifts, frame_width, params, cache)
     n.confidence = confidence(n)
-    return n
-
-
-def _move(c: Matches, i: int, n: Matches, j: int) -> None:
-    """Match ``i`` of ``c`` becomes pair ``j`` of ``n``, with all its evidence."""
-    for key, value in n.__dict__.items():
-        if value is not None and getattr(c, key) is not None:
-            getattr(c, key)[i] = value[j]
+    close = tiers(n, params, share_steps=False) == "auto"      # by the measured distance alone
+    c, status = c.take(np.arange(len(c))), status.copy()
+    for i in todo:
+        mine = np.flatnonzero(close & (owner == i))
+        if mine.size:
+            j = mine[np.argmin(n.distance_steps[mine])]
+            for key, value in n.__dict__.items():
+                if value is not None and getattr(c, key) is not None:
+                    getattr(c, key)[i] = value[j]
+            status[i] = "auto"
+    return c, status
 
 
 # Heading drift per node step along the path, degrees (consecutive alignments err by a few

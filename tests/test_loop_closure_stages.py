@@ -2,8 +2,7 @@
 
 import numpy as np
 
-from engine import loop_closure
-from engine.loop_closure import Matches, consistency, nearest, one_per_place, tiers
+from engine.loop_closure import Matches, consistency, one_per_place, tiers
 from engine.params import MapParams
 
 P = MapParams()
@@ -145,47 +144,3 @@ def test_a_candidate_whose_path_runs_away_is_not_put_to_a_person_and_one_that_re
     c = matches(a=[20], b=[180], score=[P.candidate_z])
     c.closure = np.array([np.nan])
     assert closure(c, np.array(["candidate"], dtype=object), P).tolist() == ["candidate"]
-
-
-
-def measured_as(distance):
-    """Stage 7b's evidence stood in by ``distance(a, b)`` in node steps: every pair shares
-    plenty of inliers with a high score, and its views measure ``distance``."""
-    def measured(a, b, *args):
-        n = matches(a=a, b=b, score=[P.auto_geometry_z + 1] * len(a), inliers=[P.auto_inliers * 3] * len(a),
-                    ratio=[0.8] * len(a), step=[P.auto_inliers * 5] * len(a))
-        n.distance_steps = distance(np.asarray(a, float), np.asarray(b, float))
-        return n
-    return measured
-
-
-def crossing(a, b):
-    # Two straight paths crossing at right angles: nodes 0-40 along one, 60-100 along the
-    # other, node 20 on node 80 (distance in node steps).
-    return np.hypot(a - 20.0, b - 80.0)
-
-
-def run_nearest(a, b, distance):
-    c = measured_as(distance)(np.array([a]), np.array([b]))
-    return nearest(c, np.array(["candidate"]), None, None, object(), np.arange(101), np.zeros(101, np.int64),
-                   0, P, {})
-
-
-def test_a_crossing_kept_two_nodes_off_moves_to_the_pair_that_meets(monkeypatch):
-    # Stage 4 kept the best-scored pair (22, 82), 2.8 steps apart; one node beside it still
-    # measures 1.4 steps, two nodes beside it the paths meet.
-    monkeypatch.setattr(loop_closure, "_measured", measured_as(crossing))
-    c, status = run_nearest(22, 82, crossing)
-    assert status.tolist() == ["auto"] and (c.a[0], c.b[0]) == (20, 80)
-
-
-def test_the_walk_stays_within_the_place_and_needs_every_step_closer(monkeypatch):
-    monkeypatch.setattr(loop_closure, "_measured", measured_as(crossing))
-    start = 20 + P.place_radius + 3
-    far, far_status = run_nearest(start, start + 60, crossing)
-    assert far_status.tolist() == ["candidate"] and (far.a[0], far.b[0]) == (start, start + 60)
-    def farther(a, b):   # noqa: E306  every pair beside the kept one measures farther
-        return np.where((a == 22) & (b == 82), 2.0, 10.0)
-    monkeypatch.setattr(loop_closure, "_measured", measured_as(farther))
-    kept, kept_status = run_nearest(22, 82, farther)
-    assert kept_status.tolist() == ["candidate"] and (kept.a[0], kept.b[0]) == (22, 82)
