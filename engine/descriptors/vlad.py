@@ -105,11 +105,11 @@ def kmeans_cosine(features: np.ndarray, k: int, iters: int = 30, seed: int = 0) 
     deterministic from ``seed``. An empty cluster is re-seeded with the row that is
     worst represented by its current centre.
 
-    Computed in float64 on the CPU whatever device made the features: the result then
-    depends only on the input rows and the seed, not on BLAS kernels, thread counts or a
-    GPU's reduction order (a float32 run on CUDA gave other centres, issue 15). On CUDA the
-    same float64 steps run on the GPU (``vlad_torch.kmeans_cosine_torch``; 58 s on the 2-core
-    development machine for 65,536 x 1536 rows, 30 iterations).
+    Computed in float64: the result then depends only on the input rows and the seed, not on
+    BLAS kernels, thread counts or a GPU's reduction order (a float32 run on CUDA gave other
+    centres, issue 15). This is the CPU's version (58 s on the 2-core development machine for
+    65,536 x 1536 random rows, 30 iterations); on CUDA ``vlad_torch.kmeans_cosine_torch`` runs
+    the same steps on the GPU.
     """
     x, centers = kmeans_start(features, k, seed)
     labels = None
