@@ -349,6 +349,15 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     ``auto_plane_share`` of the inliers lie on one plane: a flat picture copied elsewhere (a
     poster, a printed facade, a repeated wall texture) fits two views as well as the place
     does; a revisit sees things at several depths.
+    A measured distance counts only with at least ``auto_measured_share`` of a step's inliers:
+    a texture repeated along a corridor or a block can fit two views metres apart as a virtual
+    pair a fraction of a step apart (0.2-0.33 steps for views 6-19 m apart on the second
+    family), but then only the repeated part matches and the pair shares a third to a half of
+    what a step shares; every true loop the first family accepts by its distance shares 0.7 or
+    more. With that check a loop whose views measure within a step needs only ``candidate_z``
+    of score, not ``auto_geometry_z``: the score's job at this tier is to guard against a
+    fooled geometry, and two checks of the geometry now do it (the fifth and seventh rounds
+    tried the lower score without the share check and each met such a pair: dropped).
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
@@ -360,7 +369,9 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     step = np.maximum(c.step_inliers if c.step_inliers is not None else np.zeros(len(c), np.int64), 0)
     plane = c.plane_share if c.plane_share is not None else np.full(len(c), np.nan)
     apart = c.distance_steps if c.distance_steps is not None else np.full(len(c), np.nan)
-    one_place = (apart <= params.auto_distance_steps)                                 # NaN: no
+    measured_close = ((apart <= params.auto_distance_steps)                            # NaN: no
+                      & (c.inliers >= params.auto_measured_share * step))
+    one_place = measured_close.copy()
     if share_steps:   # the count only where the distance is not measured: a measurement outranks it
         one_place |= (c.inliers >= params.auto_step_share * step) & ~(apart > params.auto_distance_steps)
     geo_strong = ((c.inliers >= params.auto_inliers) & one_place
@@ -368,7 +379,8 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
 
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    auto = ((geo_strong & (c.score >= params.auto_geometry_z))
+    auto = ((geo_strong & ((c.score >= params.auto_geometry_z)
+                           | (measured_close & (c.score >= params.candidate_z))))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))
     cand = ~auto & (c.score >= params.candidate_z) & (c.confidence >= params.candidate_confidence)
     return np.where(auto, "auto", np.where(cand, "candidate", ""))

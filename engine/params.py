@@ -110,6 +110,14 @@ PARAMETERS: tuple[Parameter, ...] = (
               "value in 1.0-1.2 (1.3 makes a false loop); 1.1 is also that range's middle. "
               "Chosen in the sixth round (was 1.0, one step by definition) before the second "
               "family's seeds 31-42 were mapped", 0.0, 100.0),
+    Parameter("auto_measured_share", float, 0.6, _NEW,
+              "a loop judged by its measured distance also shares at least this share of the "
+              "inliers each end shares with its next node (views measured close that share far "
+              "less were fitted to something repeated, not to the place)",
+              "first synthetic family (seeds 0-4): the 257 true automatic loops accepted by "
+              "their measured distance share 0.70-2.4 of a step's inliers (5th percentile "
+              "0.83); 0.6 lies under all of them. Seventh round; the distances fitted to a "
+              "repeated texture that the second family showed shared 0.33-0.54", 0.0, 100.0),
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",
@@ -161,6 +169,7 @@ class MapParams:
     auto_geometry_z: float = 3.5
     auto_step_share: float = 1.0
     auto_distance_steps: float = 1.1
+    auto_measured_share: float = 0.6
     auto_plane_share: float = 0.6
     place_radius: int = 4
     heading_tol: float = 35.0

@@ -46,10 +46,33 @@ def test_views_measured_closer_than_one_node_step_are_one_place_though_they_shar
     # A revisit half a step away, in other light and with other people about, can share
     # fewer inliers than a step made a second apart; its measured distance says one place.
     strong = P.auto_inliers * 3
-    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[P.candidate_z + 1] * 3, inliers=[strong] * 3,
-                ratio=[0.8] * 3, step=[strong * 2] * 3, confidence=[P.candidate_confidence + 10] * 3)
+    step = int(strong / (P.auto_measured_share + 0.5 * (1 - P.auto_measured_share)))   # shares less than a step
+    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[P.auto_geometry_z] * 3, inliers=[strong] * 3,
+                ratio=[0.8] * 3, step=[step] * 3, confidence=[P.candidate_confidence + 10] * 3)
     c.distance_steps = np.array([0.5 * P.auto_distance_steps, 1.5 * P.auto_distance_steps, np.nan])
     assert tiers(c, P).tolist() == ["auto", "candidate", "candidate"]
+
+
+def test_views_measured_close_that_share_little_of_a_step_were_fitted_to_a_repeated_texture():
+    # Two corridor views metres apart, fitted to a texture they both see, measure a fraction
+    # of a step apart but share a third of what a step shares: not one place, whatever the score.
+    strong = P.auto_inliers * 2
+    c = matches(a=[0, 30], b=[100, 130], score=[P.auto_geometry_z + 2, P.auto_geometry_z + 2], inliers=[strong] * 2,
+                ratio=[0.8] * 2, step=[strong * 3, strong], confidence=[P.candidate_confidence + 10] * 2)
+    c.distance_steps = np.array([0.3, 0.3])
+    assert tiers(c, P).tolist() == ["candidate", "auto"]
+
+
+def test_views_measured_within_a_step_need_only_the_queues_score():
+    # Strong geometry at a score between candidate_z and auto_geometry_z: automatic where the
+    # two views measure within a step (sharing what a near view does), left to a person where
+    # only the inliers vouch for it.
+    strong = P.auto_inliers * 3
+    z = (P.candidate_z + P.auto_geometry_z) / 2
+    c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[z, z, P.candidate_z - 0.1], inliers=[strong] * 3,
+                ratio=[0.8] * 3, step=[strong - 1] * 3, confidence=[P.candidate_confidence + 10] * 3)
+    c.distance_steps = np.array([0.5 * P.auto_distance_steps, np.nan, 0.5 * P.auto_distance_steps])
+    assert tiers(c, P).tolist() == ["auto", "candidate", ""]
 
 
 def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much_they_share():
