@@ -27,7 +27,8 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     Cached per frame pair.
 6. ``confidence``   one ranking number from the three voices.
 7. ``tiers``        auto (the two visits are as close as one node step: they share as many
-                    inliers, or measure closer) or candidate (for a person), by the thresholds.
+                    inliers, or measure closer while sharing a good part of a step's inliers)
+                    or candidate (for a person), by the thresholds.
    ``nearest``      a match that geometry confirms as the same scene, not yet as the same
                     place, moves to the pair one node beside it whose views measure closest,
                     when those are at most ``auto_distance_steps`` apart (an automatic loop).
