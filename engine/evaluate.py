@@ -222,7 +222,7 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         precision=_ratio(tp, tp + fp), recall=_ratio(tp, tp + fn),
         accuracy=_ratio(tp + tn, total), f1=_ratio(2 * tp, 2 * tp + fp + fn),
         tp_pairs=tp_pairs, fp_pairs=fp_pairs, fn_pairs=fn_pairs,
-        events_found=int(found), events_total=int(events_total),
+        events_found=found, events_total=events_total,
         loop_truth=loop_truth, dist_th=float(dist_th), neighbor_node_num=nn,
         event_closest=event_closest.tolist(), event_found=event_found.tolist(),
     )

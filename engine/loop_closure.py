@@ -372,9 +372,10 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     apart = c.distance_steps if c.distance_steps is not None else np.full(len(c), np.nan)
     measured_close = ((apart <= params.auto_distance_steps)                            # NaN: no
                       & (c.inliers >= params.auto_measured_share * step))
-    one_place = measured_close.copy()
+    one_place = measured_close
     if share_steps:   # the count only where the distance is not measured: a measurement outranks it
-        one_place |= (c.inliers >= params.auto_step_share * step) & ~(apart > params.auto_distance_steps)
+        one_place = one_place | ((c.inliers >= params.auto_step_share * step)
+                                 & ~(apart > params.auto_distance_steps))
     geo_strong = ((c.inliers >= params.auto_inliers) & one_place
                   & ~(plane > params.auto_plane_share))                          # NaN: not flat
 
