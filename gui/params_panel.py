@@ -3,19 +3,25 @@
 Map parameter edits emit ``paramsEdited(field, MapParams)``; the window rebuilds
 the map from the cached descriptors at once. Descriptor and interval edits emit
 ``describeEdited`` and are applied by the Run button (a new describe, cached).
+The paper's parameters have hand-made widgets; every other parameter of the typed
+table (``engine.params.PARAMETERS``) gets a widget generated from its entry, so a
+threshold added to the table is editable here without touching this module.
 """
 
 from __future__ import annotations
 
+import math
+import textwrap
 from dataclasses import replace
 from typing import Optional
 
-from PySide6.QtCore import Signal
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout,
-                               QPushButton, QSpinBox, QVBoxLayout, QWidget)
+from PySide6.QtCore import QEvent, QObject, Qt, Signal
+from PySide6.QtWidgets import (QAbstractSpinBox, QApplication, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
+                               QFrame, QGroupBox, QHBoxLayout, QPushButton, QScrollArea, QSpinBox, QVBoxLayout,
+                               QWidget)
 
 from engine import params as params_module
-from engine.params import MapParams
+from engine.params import MapParams, Parameter
 
 METHOD_TIPS = {
     "simple": "Simple threshold on unshifted descriptors (paper baseline)",
@@ -29,6 +35,7 @@ class ParamsPanel(QWidget):
     describeEdited = Signal()
     runRequested = Signal()
     calibrateRequested = Signal()        # thresholds of the paper's methods from the recording
+    DEFAULTS_FIELD = "defaults"          # the field name of the group's "Defaults" edit (one undo step)
 
     def __init__(self, parent: Optional[QWidget] = None) -> None:
         super().__init__(parent)
@@ -88,7 +95,7 @@ class ParamsPanel(QWidget):
         row.addWidget(self.run_button)
         form.addRow(row)
         map_box = QGroupBox("Map (applied at once)")
-        form = QFormLayout(map_box)
+        self._map_form = form = QFormLayout(map_box)
         form.addRow("Method", self.method)
         form.addRow("Node similarity", self.node_sim_th)
         form.addRow("Loop similarity", self.loop_sim_th)
@@ -97,12 +104,62 @@ class ParamsPanel(QWidget):
         form.addRow("Neighbour nodes", self.neighbor_node_num)
         form.addRow("", self.long_runs)
         form.addRow("", self.calibrate_button)
-        layout = QVBoxLayout(self)
+        self._build_evidence()
+
+        # One scroll area for the whole panel: with the generated rows it is taller than a
+        # 720-px screen leaves the dock, and the window must still fit there.
+        inner = QWidget()
+        layout = QVBoxLayout(inner)
         layout.setContentsMargins(4, 4, 4, 4)
         layout.addWidget(describe_box)
         layout.addWidget(map_box)
+        layout.addWidget(self.evidence_box)
         layout.addStretch(1)
+        self.scroll = QScrollArea()
+        self.scroll.setWidget(inner)
+        self.scroll.setWidgetResizable(True)
+        self.scroll.setFrameShape(QFrame.NoFrame)
+        self.scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+        # Never narrower than the rows (no clipped spin boxes), scroll bar included.
+        bar = self.scroll.verticalScrollBar().sizeHint().width()
+        self.scroll.setMinimumWidth(inner.minimumSizeHint().width() + bar)
+        outer = QVBoxLayout(self)
+        outer.setContentsMargins(0, 0, 0, 0)
+        outer.addWidget(self.scroll)
+        for w in inner.findChildren(QAbstractSpinBox) + inner.findChildren(QComboBox):
+            w.setFocusPolicy(Qt.StrongFocus)   # a wheel does not focus it...
+            w.installEventFilter(self)         # ...and scrolls the panel (eventFilter)
         self.set_params(MapParams(), {"node_sim_th": 0.8, "loop_sim_th": 0.55})
+
+    def _build_evidence(self) -> None:
+        """A generated row for each table parameter without a hand-made widget (``verified``'s
+        thresholds), and a button back to the table's defaults."""
+        self.generated: dict[str, Parameter] = {p.name: p for p in params_module.PARAMETERS
+                                                if p.name not in HAND_MADE and p.type in (bool, int, float)}
+        self.evidence = {name: _widget_for(p) for name, p in self.generated.items()}
+        for name, w in self.evidence.items():
+            signal = w.toggled if isinstance(w, QCheckBox) else w.valueChanged
+            signal.connect(lambda _, n=name: self._edited(n))
+        self.defaults_button = QPushButton("Defaults")
+        self.defaults_button.setToolTip("This group's values back to the defaults of engine/params.py "
+                                        "(one undo step)")
+        self.defaults_button.clicked.connect(self.restore_defaults)
+        self.evidence_box = QGroupBox("Loop evidence")
+        self._evidence_form = form = QFormLayout(self.evidence_box)
+        for name, w in self.evidence.items():
+            form.addRow(name, w)   # the table's name: the CLI option, the GraphML key, the help's words
+        row = QHBoxLayout()
+        row.addStretch(1)
+        row.addWidget(self.defaults_button)
+        form.addRow(row)
+
+    def eventFilter(self, watched: QObject, event: QEvent) -> bool:
+        """A wheel over a field not being edited scrolls the panel: it must not change a
+        threshold (and re-map) in passing."""
+        if event.type() == QEvent.Wheel and not watched.hasFocus():
+            QApplication.sendEvent(self.scroll.verticalScrollBar(), event)
+            return True
+        return super().eventFilter(watched, event)
 
     # -- values ----------------------------------------------------------------------
     def params(self) -> MapParams:
@@ -123,10 +180,21 @@ class ParamsPanel(QWidget):
             self.count_th.setValue(int(shown.count_th))
             self.neighbor_node_num.setValue(int(shown.neighbor_node_num))
             self.long_runs.setChecked(bool(shown.long_runs))
+            self._show_evidence(shown)
         finally:
             self._updating = False
         self._params = params
         self._enable_for_method()
+
+    def _show_evidence(self, params: MapParams) -> None:
+        for name, w in self.evidence.items():
+            value = getattr(params, name)
+            if value is None:
+                continue
+            if isinstance(w, QCheckBox):
+                w.setChecked(bool(value))
+            else:
+                w.setValue(value)
 
     def set_describe(self, descriptor: str, interval: float) -> None:
         self._updating = True
@@ -152,24 +220,51 @@ class ParamsPanel(QWidget):
             return
         if field == "method":
             value = self.method.currentData()
-        elif field == "long_runs":
-            value = self.long_runs.isChecked()
         else:
-            value = getattr(self, field).value()
+            w = self.evidence[field] if field in self.evidence else getattr(self, field)
+            value = w.isChecked() if isinstance(w, QCheckBox) else w.value()
         self._params = replace(self._params, **{field: value})
         self._enable_for_method()
         self.paramsEdited.emit(field, self._params)
+
+    def restore_defaults(self) -> None:
+        """The table's defaults for every generated row the method reads, as one edit (one undo step)."""
+        new = replace(self._params, **{n: p.default for n, p in self._read_generated().items()})
+        if new == self._params:
+            return
+        self._updating = True
+        try:
+            self._show_evidence(new)
+        finally:
+            self._updating = False
+        self._params = new
+        self._enable_for_method()
+        self.paramsEdited.emit(self.DEFAULTS_FIELD, new)
+
+    def _read_generated(self) -> dict[str, Parameter]:
+        method = self.method.currentData()
+        return {n: p for n, p in self.generated.items() if method in p.methods}
 
     def _describe_changed(self) -> None:
         if not self._updating:
             self.describeEdited.emit()
 
     def _enable_for_method(self) -> None:
-        """Only the parameters the chosen method reads can be edited."""
+        """Only the parameters the chosen method reads are shown (and enabled): on a 720-px
+        screen the rows of the others would push ``verified``'s thresholds out of sight."""
         used = PARAMS_USED.get(self.method.currentData(), set(PARAMS_USED["ours"]))
         for name in set().union(*PARAMS_USED.values()):
             getattr(self, name).setEnabled(name in used)
+            self._map_form.setRowVisible(getattr(self, name), name in used)
         self.calibrate_button.setEnabled("loop_sim_th" in used)
+        self._map_form.setRowVisible(self.calibrate_button, "loop_sim_th" in used)
+        read = self._read_generated()
+        for name, w in self.evidence.items():
+            w.setEnabled(name in read)
+            self._evidence_form.setRowVisible(w, name in read)
+        self.evidence_box.setVisible(bool(read))
+        self.evidence_box.setTitle(f"Loop evidence ({self.method.currentData()})")
+        self.defaults_button.setEnabled(any(getattr(self._params, n) != p.default for n, p in read.items()))
 
 
 # Which map parameters each method reads (engine/loops.py, engine/loops_verified.py):
@@ -181,6 +276,10 @@ PARAMS_USED = {
     "verified": {"node_sim_th", "neighbor_node_num"},
     "verified-rules": {"node_sim_th", "neighbor_node_num", "long_runs"},
 }
+# Parameters with a widget made by hand above; the panel generates one for every other.
+HAND_MADE = {"method"}.union(*PARAMS_USED.values())
+# Spin box bounds where the table declares none, or one too large to show (its digits set the box's width).
+SPIN_LIMIT = 1e6
 
 
 def _double(lo: float, hi: float, step: float, tip: str) -> QDoubleSpinBox:
@@ -198,4 +297,47 @@ def _int(lo: int, hi: int, tip: str) -> QSpinBox:
     w.setRange(lo, hi)
     w.setToolTip(tip)
     w.setKeyboardTracking(False)
+    return w
+
+
+def spin_range(p: Parameter) -> tuple[float, float]:
+    """The table's range, or +-``SPIN_LIMIT`` for a missing or huge bound."""
+    lo = p.minimum if p.minimum is not None and abs(p.minimum) <= SPIN_LIMIT else -SPIN_LIMIT
+    hi = p.maximum if p.maximum is not None and abs(p.maximum) <= SPIN_LIMIT else SPIN_LIMIT
+    return lo, hi
+
+
+def float_step(p: Parameter, lo: float, hi: float) -> float:
+    """A tenth of the default's order of magnitude (0.6 -> 0.01, 3.5 -> 0.1, 35 -> 1), within the
+    range: an arrow click nudges the value, it does not jump across what matters."""
+    scale = min(abs(float(p.default or 0.0)) or hi - lo, hi - lo)
+    return 10.0 ** (math.floor(math.log10(scale)) - 1) if scale > 0 else 0.1
+
+
+def tooltip(p: Parameter) -> str:
+    """What it does and where its number came from, wrapped: Qt shows a plain tooltip on one line."""
+    text = f"{p.help}\nWhere the number came from: {p.origin} (default {p.default})"
+    return "\n".join(textwrap.fill(line, 90) for line in text.split("\n"))
+
+
+def _widget_for(p: Parameter) -> QWidget:
+    """A check box, spin box or double spin box for one table entry, showing its default."""
+    if p.type is bool:
+        w = QCheckBox()
+        w.setChecked(bool(p.default))
+    elif p.type is int:
+        lo, hi = spin_range(p)
+        w = _int(int(math.ceil(lo)), int(math.floor(hi)), "")
+    else:
+        lo, hi = spin_range(p)
+        step = float_step(p, lo, hi)
+        w = _double(lo, hi, step, "")
+        decimals = max(2, 1 - math.floor(math.log10(step)))
+        while p.default is not None and round(float(p.default), decimals) != p.default and decimals < 6:
+            decimals += 1   # the default shown exactly
+        w.setDecimals(decimals)
+        w.setRange(lo, hi)   # again: the range is rounded to the decimals in force when it is set
+    if p.type is not bool and p.default is not None:
+        w.setValue(p.default)
+    w.setToolTip(tooltip(p))
     return w

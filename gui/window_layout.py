@@ -6,7 +6,9 @@ side by side (issue 14, defects 3 and 4); on a 1920-px screen the pair view besi
 table got ~450 px, its panoramas ~340 px wide. So the table and the pair view are
 stacked in the right column, both as wide as it: the table shows every column, and
 the pair view, wide and short, puts its two panoramas side by side (``PairView``
-picks that itself), each about half the column wide.
+picks that itself), each about half the column wide. In the left dock column the
+evaluation gets the height of its few rows and the parameters (a long, scrolling
+list with ``verified``'s thresholds) the rest.
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ def split_views(window) -> None:
     graph, table, _ = (int(share * height) for share in RIGHT_SHARES)
     right.setSizes([graph, height - graph])
     window.bottom_splitter.setSizes([table, height - graph - table])
+    docks = (window.params_dock, window.eval_dock)
+    if all(d.isVisible() and not d.isFloating() for d in docks):
+        evaluation = window.eval_dock.sizeHint().height()
+        window.resizeDocks(list(docks), [sum(d.height() for d in docks) - evaluation, evaluation], Qt.Vertical)
     column = window.left_splitter.height()
     if column > NODE_PANEL_MIN + 140:   # the viewer as tall as its two panoramas, the node panel below
         viewer = min(left + VIEWER_EXTRA, column - NODE_PANEL_MIN)

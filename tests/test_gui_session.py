@@ -215,6 +215,29 @@ def test_verified_shows_the_node_threshold_it_calibrated(qtbot, make_window, rec
     assert w.params_panel.node_sim_th.value() == pytest.approx(w.doc.topomap.meta["node_sim_th"], abs=1e-3)
 
 
+def test_a_verified_threshold_remaps_and_undo_restores_it(qtbot, make_window, recording, tmp_path):
+    w = make_window()
+    panel = w.params_panel
+    panel.method.setCurrentIndex(panel.method.findData("verified"))
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    before = w.doc.params
+    box = panel.evidence["auto_inliers"]
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):  # a generated row, through the same undoable path
+        box.setValue(before.auto_inliers + 15)
+    assert w.doc.params.auto_inliers == before.auto_inliers + 15
+    assert w.doc.topomap.meta["auto_inliers"] == before.auto_inliers + 15   # the map was built with it
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):  # the group's Defaults: one more undo step
+        qtbot.mouseClick(panel.defaults_button, Qt.LeftButton)
+    assert w.doc.params == before and w.doc.topomap.meta["auto_inliers"] == before.auto_inliers
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):
+        w.undo_stack.undo()                             # back to the edited value
+    assert w.doc.params.auto_inliers == box.value() == before.auto_inliers + 15
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):
+        w.undo_stack.undo()                             # and to the table's value
+    assert w.doc.params == before and box.value() == before.auto_inliers
+    assert w.doc.topomap.meta["auto_inliers"] == before.auto_inliers
+
+
 def test_thresholds_from_the_recording_are_one_undo_step(qtbot, make_window, recording, tmp_path):
     from engine.calibrate import paper_thresholds
 
