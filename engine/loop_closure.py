@@ -40,6 +40,9 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     geometry of consecutive nodes, one unit per node step) must meet again,
                     or the loop joins two look-alike places far apart: an automatic loop
                     goes back to the candidate tier, a candidate is dropped.
+   ``lengths``      and of two loops, the stretches between their ends join the same two
+                    places, so they are equally long: of two automatic loops that cannot
+                    both hold, the less confident goes back to the candidate tier.
 
 Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
 so re-mapping after a threshold change costs the arithmetic of the stages, not the retrieval
@@ -564,12 +567,62 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     return out
 
 
+def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params: MapParams) -> np.ndarray:
+    """Stage 9b: demote an automatic loop that cannot hold together with a more confident one.
+
+    Two loops (a1, b1) and (a2, b2) say that a1 and b1 are one place and a2 and b2 are one
+    place, so the path from a1 to a2 and the path from b1 to b2 join the same two places:
+    their ends lie equally far apart. Dead reckoning (``path_track``, in node steps) may miss
+    by what stage 9 allows a path of that length, ``closure_slack + closure_rate`` times the
+    steps of the two stretches; a pair of loops whose stretches differ by more cannot both be
+    right. Typical: one node joined to two nodes of another pass seven steps apart (a reverse
+    drive on the second family, seed 58: the true pair and one 5.9 m off with fewer inliers).
+    This is the translation half of the PCM idea, stage 8 being its rotation half; lengths, not
+    vectors, are compared, so the heading between the two passes does not enter. Loops are
+    taken in order of confidence, and one that conflicts with a loop already taken goes back to
+    "candidate" (a person decides). No new number: stage 9's tolerance, chosen on the first
+    synthetic family, where (seeds 0-4) none of the 366 automatic loops conflicts with another.
+    Memory is one row of the taken loops at a time (a large map can hold many loops)."""
+    out = status.copy()
+    auto = np.flatnonzero(status == "auto")
+    if track is None or auto.size < 2:
+        return out
+    taken = np.zeros(auto.size, np.int64)
+    count = 0
+    for k in auto[np.argsort(-c.confidence[auto], kind="stable")]:
+        ta, tb = c.a[taken[:count]], c.b[taken[:count]]
+        apart_a = np.linalg.norm(track[ta] - track[c.a[k]], axis=1)
+        apart_b = np.linalg.norm(track[tb] - track[c.b[k]], axis=1)
+        steps = np.abs(ta - c.a[k]) + np.abs(tb - c.b[k])
+        if (np.abs(apart_a - apart_b) > params.closure_slack + params.closure_rate * steps).any():
+            out[k] = "candidate"
+        else:
+            taken[count] = k
+            count += 1
+    return out
+
+
+def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], track: Optional[np.ndarray],
+                params: MapParams) -> np.ndarray:
+    """Stages 8, 9 and 9b in their order: the loops' headings against each other, each loop
+    alone against its path, then the lengths of the loops that passed both.
+
+    Tried in the eighth round and dropped: stage 9 before stage 8, so that a loop the path
+    rejects would not vote on headings. On the second family's seeds 31-42 it lost a place and
+    let a false loop through: where the path's headings carry a 180-degree step (README,
+    stage 8), two loops decide against each other by confidence alone, and the loop stage 9
+    removed first had been what kept the right one."""
+    status = consistency(c, status, headings, params)                  # 8
+    status = closure(c, status, params)                                # 9
+    return lengths(c, status, track, params)                           # 9b
+
+
 # ----------------------------------------------------------------------------- the method
 
 def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarray,
                  features=None, columns=None, shifts=None, frame_width: int = 0,
                  cache: Optional[dict] = None) -> list[LoopCandidate]:
-    """The ``verified`` method on node descriptors ``vectors`` (m, d): stages 1-9.
+    """The ``verified`` method on node descriptors ``vectors`` (m, d): stages 1-9b.
 
     ``node_rows`` are the descriptor rows of the nodes (features are per row); ``features``
     (``engine.features.FeatureTable``), ``columns`` and ``shifts`` are optional: without
@@ -598,10 +651,9 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     status = tiers(c, params)                                          # 7
     c, status = nearest(c, status, v, stats, features, node_rows, shifts, frame_width, params, cache)   # 7b
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
-    status = consistency(c, status, headings, params)                  # 8
     track = path_track(features, node_rows, shifts, frame_width, headings, cache)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
-    status = closure(c, status, params)                                # 9
+    status = path_checks(c, status, headings, track, params)          # 8, 9, 9b
     out = []
     for i in np.flatnonzero(status != ""):
         out.append(LoopCandidate(

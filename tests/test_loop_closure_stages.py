@@ -167,3 +167,33 @@ def test_a_candidate_whose_path_runs_away_is_not_put_to_a_person_and_one_that_re
     c = matches(a=[20], b=[180], score=[P.candidate_z])
     c.closure = np.array([np.nan])
     assert closure(c, np.array(["candidate"], dtype=object), P).tolist() == ["candidate"]
+
+
+def _out_and_back(steps_out: int) -> np.ndarray:
+    """Dead-reckoned track of a drive ``steps_out`` node steps east and straight back."""
+    i = np.arange(2 * steps_out + 1.0)
+    return np.stack([steps_out - np.abs(steps_out - i), np.zeros(i.size)], axis=1)
+
+
+def test_a_node_joined_to_two_places_apart_on_the_other_pass_keeps_only_the_more_confident_loop():
+    from engine.loop_closure import lengths
+
+    track = _out_and_back(100)      # node i and node 200 - i are one place
+    # Three true loops along the return, and node 14 joined once more, to node 176: ten steps
+    # away from node 186 on the same pass, so 14 cannot be both places.
+    c = matches(a=[10, 14, 18, 14], b=[190, 186, 182, 176], score=[8, 8, 8, 5], confidence=[8, 8, 8, 5])
+    status = np.array(["auto"] * 4, dtype=object)
+    assert lengths(c, status, track, P).tolist() == ["auto", "auto", "auto", "candidate"]
+    # Without a track (no geometry) nothing is judged.
+    assert lengths(c, status, None, P).tolist() == ["auto"] * 4
+
+
+def test_a_place_passed_on_three_laps_keeps_both_of_its_loops():
+    from engine.loop_closure import lengths
+
+    # A square block, ten steps a side (40 steps a lap), driven three times.
+    side = np.repeat(np.array([[1, 0], [0, 1], [-1, 0], [0, -1]], float), 10, axis=0)
+    track = np.concatenate([[[0.0, 0.0]], np.cumsum(np.tile(side, (3, 1)), axis=0)])
+    c = matches(a=[5, 5, 45, 22], b=[45, 85, 85, 62], score=[8, 7, 6, 6], confidence=[8, 7, 6, 6])
+    status = np.array(["auto"] * 4, dtype=object)
+    assert lengths(c, status, track, P).tolist() == ["auto"] * 4
