@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_families as bf  # noqa: E402
+from engine.loop_closure import reckoning_tolerance  # noqa: E402
 from engine.params import MapParams  # noqa: E402
 from engine.run import run as run_map  # noqa: E402
 
@@ -35,7 +36,7 @@ def loop_rows(recordings, params: MapParams):
         for u, w, attrs in topomap.loops(("auto", "candidate")):
             x, y = poses.at(np.array([nodes[u]["stamp"], nodes[w]["stamp"]]))
             a, b = sorted((int(nodes[u]["index"]), int(nodes[w]["index"])))
-            tolerance = params.closure_slack + params.closure_rate * (b - a)
+            tolerance = reckoning_tolerance(b - a, params)
             closure = attrs.get("closure")
             evidence = dict(attrs, closure_ratio=None if closure is None else closure / tolerance)
             yield attrs.get("status"), float(np.hypot(x[1] - x[0], y[1] - y[0])), evidence

@@ -546,6 +546,13 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     return np.concatenate([np.zeros((1, 2)), xy])
 
 
+def reckoning_tolerance(steps, params: MapParams):
+    """Node steps dead reckoning may be off after a path of ``steps`` node steps:
+    ``closure_slack + closure_rate * steps`` (stage 9 for a loop's path, stage 9b for the two
+    stretches between two loops)."""
+    return params.closure_slack + params.closure_rate * steps
+
+
 def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     """Stage 9: the path must come back: demote automatic loops whose path does not, and
     drop candidates whose path does not.
@@ -561,7 +568,7 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     of its place missed by more than 0.83 of the tolerance, and 116 of the 273 wrong ones
     missed by more than all of it; on the second family (seeds 1-8) 0.85 and 717 of 1,045."""
     out = status.copy()
-    far = c.closure > params.closure_slack + params.closure_rate * (c.b - c.a)   # NaN: False
+    far = c.closure > reckoning_tolerance(c.b - c.a, params)   # NaN: False
     out[(status == "candidate") & far] = ""
     out[(status == "auto") & far] = "candidate"
     return out
@@ -594,7 +601,7 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
         apart_a = np.linalg.norm(track[ta] - track[c.a[k]], axis=1)
         apart_b = np.linalg.norm(track[tb] - track[c.b[k]], axis=1)
         steps = np.abs(ta - c.a[k]) + np.abs(tb - c.b[k])
-        if (np.abs(apart_a - apart_b) > params.closure_slack + params.closure_rate * steps).any():
+        if (np.abs(apart_a - apart_b) > reckoning_tolerance(steps, params)).any():
             out[k] = "candidate"
         else:
             taken[count] = k

@@ -175,11 +175,12 @@ def test_a_wheel_over_an_unfocused_threshold_scrolls_instead_of_editing(qtbot):
     panel.show()
     qtbot.waitExposed(panel)
     w = panel.evidence["auto_inliers"]
+    shown = w.value()
     emitted = []
     panel.paramsEdited.connect(lambda *args: emitted.append(args))
     at = QPointF(w.rect().center())
     wheel = QWheelEvent(at, QPointF(w.mapToGlobal(at)), QPoint(), QPoint(0, -120), Qt.NoButton, Qt.NoModifier,
                         Qt.NoScrollPhase, False)
     QApplication.sendEvent(w, wheel)
-    assert w.value() == 40 and not emitted
+    assert w.value() == shown and not emitted
     assert panel.scroll.verticalScrollBar().value() > 0
