@@ -32,6 +32,9 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
    ``nearest``      a match that geometry confirms as the same scene, not yet as the same
                     place, moves to the pair one node beside it whose views measure closest,
                     when those are at most ``auto_distance_steps`` apart (an automatic loop).
+8a. ``half_turns``  a path step that read a straight step as a half turn (a scene that looks
+                    the same turned round) is turned back where the automatic loops on both
+                    sides of it agree only without it: the path's headings, repaired.
 8. ``consistency``  relative headings composed around a cycle of path and two loops must
                     close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
                     with the loops around it goes back to the candidate tier.
@@ -518,24 +521,79 @@ def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
     return out
 
 
+def half_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
+               params: MapParams) -> tuple[Optional[np.ndarray], np.ndarray]:
+    """Stage 8a: path steps whose half turn the loops overrule; the headings without it, and
+    those steps.
+
+    Two views of a scene that looks the same turned half way round (two facing walls with
+    the same picture, a symmetric corridor) fit a model turned by 180 degrees as well as the
+    right one, and a straight step can read as a half turn. Every heading after it is then
+    half a turn off, and stage 8 sees two groups of loops, each consistent within itself,
+    that disagree by 180 degrees: those whose path runs over the step and those whose path
+    does not (the second family, seeds 32, 36, 39, 41, 44, 47: one such step each, 19-72
+    inliers, where a node's loops on both sides were then sent to the queue). A step that
+    measured a half turn (within ``heading_tol`` of 180 degrees) is taken as straight when
+    that makes more pairs of automatic loops across it agree (stage 8's test) than disagree
+    before, and at least two loops on each side agree with one on the other: one loop against
+    one is no majority, and a lone wrong loop cannot turn the path to fit itself. Steps are
+    taken one at a time, the largest gain first. No new number: stage 8's tolerance, and two
+    as the least that is a majority of more than one voice. A robot that really turned on
+    the spot keeps its half turn: the loops across such a step agree with it."""
+    none = np.zeros(0, np.int64)
+    if headings is None or headings.size < 2:
+        return headings, none
+    auto = np.flatnonzero((status == "auto") & np.isfinite(c.yaw))
+    half = np.flatnonzero(np.abs(_wrap(np.diff(headings))) >= 180.0 - params.heading_tol)
+    if auto.size < 4 or half.size == 0:
+        return headings, none
+    a, b = c.a[auto], c.b[auto]
+    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
+    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
+    comparable = tol <= 90.0
+    out, overruled = headings.astype(np.float64).copy(), []
+    while True:
+        offset = _wrap(c.yaw[auto] - (out[b] - out[a]))
+        diff = offset[:, None] - offset[None, :]
+        agree_now = comparable & (np.abs(_wrap(diff)) <= tol)
+        agree_turned = comparable & (np.abs(_wrap(diff + 180.0)) <= tol)
+        best, best_gain = -1, 0
+        for k in half:
+            if k in overruled:
+                continue
+            over = (a <= k) & (k < b)
+            across = over[:, None] != over[None, :]
+            after = agree_turned & across
+            gain = int(after.sum() - (agree_now & across).sum()) // 2
+            joined = after.any(axis=1)
+            if gain > best_gain and (joined & over).sum() >= 2 and (joined & ~over).sum() >= 2:
+                best, best_gain = int(k), gain
+        if best < 0:
+            return out, np.asarray(overruled, np.int64)
+        out[best + 1:] += 180.0
+        overruled.append(best)
+
+
 def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
-               headings: Optional[np.ndarray], cache: dict) -> Optional[np.ndarray]:
+               headings: Optional[np.ndarray], cache: dict, overruled: np.ndarray = ()) -> Optional[np.ndarray]:
     """Dead-reckoned node positions (m, 2), in node steps, or None without features.
 
     Each step from node i to i + 1 is one unit long (nodes are cut where the view has
     changed by about the same amount, and samples come at a steady rate) in the direction
     the essential model of the pair puts i + 1 seen from i (``engine.sphere.motion_azimuth``,
     turned by i's heading); where the pair has no essential model the direction of the
-    step before is kept (a robot keeps moving the way it moved). On the first synthetic
+    step before is kept (a robot keeps moving the way it moved); so too at the ``overruled``
+    steps (stage 8a: their model was the wrong one). On the first synthetic
     family (seeds 0-4) the path between the two visits of a place misses meeting by at
     most 0.53 of its length (one wrong turn indoors) and 2 steps on short returns: the
     numbers of ``closure_rate`` and ``closure_slack``."""
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
-    motion = _step_geometry(features, node_rows, cache)[:, 4]
+    motion = _step_geometry(features, node_rows, cache)[:, 4].copy()   # the cache stays as it is
     if frame_width > 0:   # azimuths of the shifted frames to the original ones
         motion = motion - shifts[steps] * 360.0 / frame_width
+    motion[np.asarray(overruled, np.int64)] = np.nan
     known = np.isfinite(motion)
     if not known.any():
         return None
@@ -658,7 +716,8 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     status = tiers(c, params)                                          # 7
     c, status = nearest(c, status, v, stats, features, node_rows, shifts, frame_width, params, cache)   # 7b
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
-    track = path_track(features, node_rows, shifts, frame_width, headings, cache)
+    headings, overruled = half_turns(c, status, headings, params)     # 8a
+    track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
     status = path_checks(c, status, headings, track, params)          # 8, 9, 9b
     out = []

@@ -197,3 +197,49 @@ def test_a_place_passed_on_three_laps_keeps_both_of_its_loops():
     c = matches(a=[5, 5, 45, 22], b=[45, 85, 85, 62], score=[8, 7, 6, 6], confidence=[8, 7, 6, 6])
     status = np.array(["auto"] * 4, dtype=object)
     assert lengths(c, status, track, P).tolist() == ["auto"] * 4
+
+
+def _out_and_back_headings(wrong_step=None) -> np.ndarray:
+    """Headings of a drive 100 steps out and back (a half turn on the spot at step 100), as
+    the path's geometry reads them: with a straight step read as a half turn at ``wrong_step``."""
+    headings = np.zeros(201)
+    headings[101:] = 180.0
+    if wrong_step is not None:
+        headings[wrong_step + 1:] += 180.0
+    return headings
+
+
+def test_a_straight_step_read_as_a_half_turn_is_overruled_by_the_loops_on_both_sides_of_it():
+    from engine.loop_closure import half_turns
+
+    # Node i and node 200 - i are one place; the return sees it turned by 180 degrees.
+    c = matches(a=[10, 14, 20, 40, 50, 60], b=[190, 186, 180, 160, 150, 140], score=[8] * 6, yaw=[180.0] * 6)
+    status = np.array(["auto"] * 6, dtype=object)
+    read = _out_and_back_headings(wrong_step=30)
+    assert consistency(c, status, read, P).tolist().count("candidate") >= 2     # the groups disagree
+    headings, overruled = half_turns(c, status, read, P)
+    assert overruled.tolist() == [30]                     # not the real turn on the spot at 100
+    assert np.allclose(np.mod(headings - _out_and_back_headings(), 360.0), 0.0)
+    assert consistency(c, status, headings, P).tolist() == ["auto"] * 6
+
+
+def test_one_loop_cannot_turn_the_path_to_fit_itself():
+    from engine.loop_closure import half_turns
+
+    # One loop over the half-turn step, three beside it: one voice against one step.
+    c = matches(a=[10, 40, 50, 60], b=[190, 160, 150, 140], score=[9, 8, 8, 8], yaw=[180.0] * 4)
+    status = np.array(["auto"] * 4, dtype=object)
+    read = _out_and_back_headings(wrong_step=30)
+    headings, overruled = half_turns(c, status, read, P)
+    assert overruled.size == 0 and np.array_equal(headings, read)
+
+
+def test_a_path_without_a_half_turn_step_is_left_as_read():
+    from engine.loop_closure import half_turns
+
+    read = np.linspace(0.0, 90.0, 201)                   # a gentle curve, no step near 180 degrees
+    c = matches(a=[10, 14, 40, 50], b=[190, 186, 160, 150], score=[8] * 4, yaw=[0.0, 0.0, 180.0, 180.0])
+    status = np.array(["auto"] * 4, dtype=object)
+    headings, overruled = half_turns(c, status, read, P)
+    assert overruled.size == 0 and np.array_equal(headings, read)
+    assert half_turns(c, status, None, P)[0] is None      # no geometry, no headings
