@@ -534,12 +534,16 @@ def half_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
     does not (the second family, seeds 32, 36, 39, 41, 44, 47: one such step each, 19-72
     inliers, where a node's loops on both sides were then sent to the queue). A step that
     measured a half turn (within ``heading_tol`` of 180 degrees) is taken as straight when
-    that makes more pairs of automatic loops across it agree (stage 8's test) than disagree
+    that makes more pairs of automatic loops across it agree (stage 8's test) than agreed
     before, and at least two loops on each side agree with one on the other: one loop against
     one is no majority, and a lone wrong loop cannot turn the path to fit itself. Steps are
     taken one at a time, the largest gain first. No new number: stage 8's tolerance, and two
     as the least that is a majority of more than one voice. A robot that really turned on
-    the spot keeps its half turn: the loops across such a step agree with it."""
+    the spot keeps its half turn: the loops across such a step agree with it.
+    Tried in the fifth round and dropped: any step, turned where that made two more pairs
+    agree; it let a false loop through on the second family's seeds 17-18. Here the step must
+    read as a half turn itself; with that, no false loop on the first family, seeds 5-42 or
+    the held-out seeds 67-72 (README, "What this shows")."""
     none = np.zeros(0, np.int64)
     if headings is None or headings.size < 2:
         return headings, none
