@@ -35,14 +35,15 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 8a. ``half_turns``  a path step that read a straight step as a half turn (a scene that looks
                     the same turned round) is turned back where the automatic loops on both
                     sides of it agree only without it: the path's headings, repaired.
-8. ``consistency``  relative headings composed around a cycle of path and two loops must
-                    close (the PCM idea of Kimera-RPGO): an automatic loop that disagrees
-                    with the loops around it goes back to the candidate tier.
 9. ``closure``      the path itself must come back: dead reckoning of the path between a
                     loop's ends (headings and directions of motion from the two-view
                     geometry of consecutive nodes, one unit per node step) must meet again,
                     or the loop joins two look-alike places far apart: an automatic loop
                     goes back to the candidate tier, a candidate is dropped.
+8. ``consistency``  then, of the loops left, relative headings composed around a cycle of
+                    path and two loops must close (the PCM idea of Kimera-RPGO): an automatic
+                    loop that disagrees with the loops around it goes back to the candidate
+                    tier (after stage 9, so that loops the path rejects do not vote).
    ``lengths``      and of two loops, the stretches between their ends join the same two
                     places, so they are equally long: of two automatic loops that cannot
                     both hold, the less confident goes back to the candidate tier.
@@ -296,14 +297,45 @@ def _distance_steps(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarra
     return out
 
 
-def _step_geometry(features, node_rows: np.ndarray, cache: dict) -> np.ndarray:
-    """``_verified`` of every consecutive node pair (i, i + 1), gathered once per node set:
-    the path's headings (stage 8) and its dead reckoning (stage 9) both read it."""
-    key = ("steps", hash(node_rows.tobytes()), node_rows.size)
+def _step_geometry(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
+                   cache: dict) -> np.ndarray:
+    """``_verified`` of every consecutive node pair (i, i + 1), gathered once per node set,
+    with the turns ``_turns_read`` finds read again: the path's headings (stage 8) and its
+    dead reckoning (stage 9) both read it."""
+    key = ("steps", hash(node_rows.tobytes()), hash(np.asarray(shifts).tobytes()), node_rows.size)
     if key not in cache:
         steps = np.arange(node_rows.size - 1)
-        cache[key] = _verified(features, node_rows, steps, steps + 1, cache)
+        geo = _verified(features, node_rows, steps, steps + 1, cache).copy()   # the pair cache stays
+        cache[key] = _turns_read(geo, features, node_rows, shifts, frame_width, cache)
     return cache[key]
+
+
+def _turns_read(geo: np.ndarray, features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
+                cache: dict) -> np.ndarray:
+    """Steps whose essential model turns the camera by more than a quarter turn are read again
+    as planar motion (``engine.sphere.planar_yaw``); where that reading differs by more than
+    a quarter turn, the step takes its yaw, and its direction of motion is left unknown
+    (``path_track`` keeps the step before's). ``geo``: rows of ``_verified``, in place.
+
+    Two views of a scene that looks the same turned round (facing walls with one picture, a
+    symmetric corridor) fit a model turned by 180 degrees, and one such step turns every
+    heading after it. Where few matches are right, RANSAC's eight-match samples find that
+    model about as often as the right one; the planar reading tries every turn and every
+    direction, so it finds the model most matches agree with. First synthetic family (seeds
+    0-4): the planar reading lies within 3 degrees of every true turn of 120-180 degrees
+    (ten), and reads the one straight step read as a turn (105 degrees) straight (1 degree).
+    Only steps read as turns are read again (a few per recording; the search costs tens of
+    milliseconds each)."""
+    from . import sphere
+
+    shifts = np.asarray(shifts, np.float64)
+    offset = (shifts[1:] - shifts[:-1]) * 360.0 / frame_width if frame_width > 0 else np.zeros(geo.shape[0])
+    turned = np.abs(_wrap(geo[:, 3] + offset)) > 90.0                  # NaN: False
+    for k in np.flatnonzero(turned & np.isfinite(geo[:, 4])):          # essential models only
+        yaw, _ = sphere.planar_yaw(_two_view(features, node_rows[k], node_rows[k + 1], cache))
+        if abs(_wrap(yaw - geo[k, 3])) > 90.0:
+            geo[k, 3], geo[k, 4] = yaw, np.nan
+    return geo
 
 
 def _neighbour_inliers(features, node_rows: np.ndarray, ends: np.ndarray, gap: int, cache: dict) -> np.ndarray:
@@ -448,15 +480,16 @@ def path_headings(features, columns, node_rows: np.ndarray, shifts: np.ndarray, 
     """Heading of every node relative to node 0, degrees, summed from consecutive relative
     yaws: two-view geometry where features exist (a robot turning on the spot between two
     nodes turns the view by 100 degrees or more, which column alignment of rotation-alike
-    corridors gets wrong: 122-degree turns read as 0-20 on the second family), column
-    alignment for steps without a model or without features; None without either."""
+    corridors gets wrong: 122-degree turns read as 0-20 on the second family; a step whose
+    model turns more than a quarter turn is read again as planar motion, ``_turns_read``),
+    column alignment for steps without a model or without features; None without either."""
     m = node_rows.size
     if m < 2:
         return np.zeros(m)
     steps = np.arange(m - 1)
     yaw = np.full(m - 1, np.nan)
     if features is not None:
-        yaw = _step_geometry(features, node_rows, cache)[:, 3]
+        yaw = _step_geometry(features, node_rows, shifts, frame_width, cache)[:, 3]
         yaw = original_yaw(yaw, shifts[steps], shifts[steps + 1], frame_width)
     if columns is not None and not np.isfinite(yaw).all():
         yaw = np.where(np.isfinite(yaw), yaw, column_yaw(columns, steps, steps + 1, shifts, frame_width))
@@ -594,7 +627,7 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
-    motion = _step_geometry(features, node_rows, cache)[:, 4].copy()   # the cache stays as it is
+    motion = _step_geometry(features, node_rows, shifts, frame_width, cache)[:, 4].copy()   # the cache stays as it is
     if frame_width > 0:   # azimuths of the shifted frames to the original ones
         motion = motion - shifts[steps] * 360.0 / frame_width
     motion[np.asarray(overruled, np.int64)] = np.nan
@@ -673,16 +706,19 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
 
 def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], track: Optional[np.ndarray],
                 params: MapParams) -> np.ndarray:
-    """Stages 8, 9 and 9b in their order: the loops' headings against each other, each loop
-    alone against its path, then the lengths of the loops that passed both.
+    """Stages 9, 8 and 9b in this order: each loop alone against its path, then the headings of
+    the loops that passed against each other, then their lengths.
 
-    Tried in the eighth round and dropped: stage 9 before stage 8, so that a loop the path
-    rejects would not vote on headings. On the second family's seeds 31-42 it lost a place and
-    let a false loop through: where the path's headings carry a 180-degree step (README,
-    stage 8), two loops decide against each other by confidence alone, and the loop stage 9
-    removed first had been what kept the right one."""
-    status = consistency(c, status, headings, params)                  # 8
+    A loop the path rejects does not vote on headings: look-alike views of a scene that looks
+    the same turned round make false loops turned by 180 degrees, all alike, so that together
+    they outvote a crossing's one true loop (the second family, seeds 36, 44 and 47). Tried in
+    the eighth round and dropped then: with the path's headings still carrying half turns read
+    at straight steps, dead reckoning let a false loop through and stage 8 had been what
+    stopped it (seeds 31-42). Kept in the ninth round, with the steps read again as planar
+    motion (``_turns_read``) and stage 8a: first family unchanged; seeds 5-30 381/446 with no
+    false loop (380 and one with stage 8 first); seeds 31-42 unchanged (169/201)."""
     status = closure(c, status, params)                                # 9
+    status = consistency(c, status, headings, params)                  # 8
     return lengths(c, status, track, params)                           # 9b
 
 

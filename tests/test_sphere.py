@@ -208,3 +208,42 @@ def test_no_distance_without_enough_points_seen_by_both_models_or_without_a_base
     # a pure rotation is also what far-away content gives: it does not say "same spot"
     turned = _fitted(room, revisit, here, model="rotation")
     assert np.isnan(baseline_ratio(turned, 1, step, 0))
+
+
+def _planar_step(turn_deg: float, move: np.ndarray, right: float, seed: int = 0):
+    """A ``TwoView`` of a corridor seen before and after a planar move (``move``, m) and turn,
+    with only ``right`` of its matches right (the others join random features)."""
+    rng = np.random.default_rng(seed)
+    n = 300
+    walls = np.c_[rng.uniform(-8, 8, n), rng.choice([-1.5, 1.5], n), rng.uniform(-1.0, 1.5, n)]
+    r = _rot(2, -turn_deg)                       # yaw convention: content displaced by -turn
+    xb = (walls - move) @ r.T
+    uv_a, uv_b = to_uv(walls), to_uv(xb)
+    wrong = rng.random(n) > right
+    uv_b[wrong] = rng.random((int(wrong.sum()), 2))
+    return TwoView(n, 0, 0.0, "none", np.eye(3), None, uv_a.astype(np.float32), uv_b.astype(np.float32),
+                   np.zeros(n, bool)), r
+
+
+@pytest.mark.parametrize("turn", [0.0, 90.0, 178.0])
+def test_planar_motion_is_read_from_every_turn_and_direction_even_when_few_matches_are_right(turn):
+    from engine.sphere import planar_yaw
+
+    tv, r = _planar_step(turn, np.array([0.8, 0.05, 0.0]), right=0.25)
+    yaw, agree = planar_yaw(tv)
+    assert abs(_wrap(yaw - yaw_of_rotation(r))) <= 2.0
+    assert agree >= 0.2 * tv.matches               # the right quarter agrees with it
+
+
+def test_a_straight_step_read_as_a_half_turn_counts_as_straight_and_a_real_turn_stays():
+    from engine.loop_closure import path_headings
+
+    straight, _ = _planar_step(0.0, np.array([0.8, 0.0, 0.0]), right=0.3, seed=1)
+    turn, r = _planar_step(170.0, np.array([0.1, 0.0, 0.0]), right=0.3, seed=2)
+    # What the general model read (matches, inliers, ratio, yaw, motion, plane share), cached
+    # as the map's stage 5 caches it: the straight step as a half turn.
+    cache = {"geometry": {(0, 1): (300, 40, 0.13, 179.0, 0.0, 0.3), (1, 2): (300, 80, 0.27, 170.0, 0.0, 0.3)},
+             "two_view": {(0, 1): straight, (1, 2): turn}}
+    headings = path_headings(object(), None, np.arange(3), np.zeros(3, np.int64), 256, cache)
+    assert abs(_wrap(headings[1] - headings[0])) <= 2.0
+    assert abs(_wrap(headings[2] - headings[1] - 170.0)) <= 2.0
