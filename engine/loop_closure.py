@@ -331,8 +331,12 @@ def _turns_read(geo: np.ndarray, features, node_rows: np.ndarray, shifts: np.nda
     shifts = np.asarray(shifts, np.float64)
     offset = (shifts[1:] - shifts[:-1]) * 360.0 / frame_width if frame_width > 0 else np.zeros(geo.shape[0])
     turned = np.abs(_wrap(geo[:, 3] + offset)) > 90.0                  # NaN: False
+    store = cache.setdefault("planar", {})                             # per frame pair, as the fits
     for k in np.flatnonzero(turned & np.isfinite(geo[:, 4])):          # essential models only
-        yaw, _ = sphere.planar_yaw(_two_view(features, node_rows[k], node_rows[k + 1], cache))
+        key = (int(node_rows[k]), int(node_rows[k + 1]))
+        if key not in store:
+            store[key] = sphere.planar_yaw(_two_view(features, key[0], key[1], cache))[0]
+        yaw = store[key]
         if abs(_wrap(yaw - geo[k, 3])) > 90.0:
             geo[k, 3], geo[k, 4] = yaw, np.nan
     return geo
