@@ -328,9 +328,7 @@ def _turns_read(geo: np.ndarray, features, node_rows: np.ndarray, shifts: np.nda
     tenth of a second for 300 matches)."""
     from . import sphere
 
-    shifts = np.asarray(shifts, np.float64)
-    offset = (shifts[1:] - shifts[:-1]) * 360.0 / frame_width if frame_width > 0 else np.zeros(geo.shape[0])
-    turned = np.abs(_wrap(geo[:, 3] + offset)) > 90.0                  # NaN: False
+    turned = np.abs(original_yaw(geo[:, 3], shifts[:-1], shifts[1:], frame_width)) > 90.0   # NaN: False
     store = cache.setdefault("planar", {})                             # per frame pair, as the fits
     for k in np.flatnonzero(turned & np.isfinite(geo[:, 4])):          # essential models only
         key = (int(node_rows[k]), int(node_rows[k + 1]))
@@ -523,6 +521,17 @@ def _wrap(deg):
     return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
 
 
+def _cycle_tolerance(a: np.ndarray, b: np.ndarray, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 8's test for every pair of loops (a[i], b[i]), (a[j], b[j]): how many degrees
+    their cycle of path and loops may miss closing (``heading_tol`` plus the drift along the
+    path between them, growing with the square root of its steps), and whether the pair is
+    near enough along the path to be compared at all (a tolerance over 90 degrees says
+    nothing). Stage 8a asks the same question of the loops across a step."""
+    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
+    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
+    return tol, tol <= 90.0
+
+
 def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], params: MapParams) -> np.ndarray:
     """Stage 8: demote automatic loops whose heading disagrees with the loops around them.
 
@@ -542,10 +551,8 @@ def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
         return out
     a, b = c.a[auto], c.b[auto]
     offset = _wrap(c.yaw[auto] - (headings[b] - headings[a]))
-    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
-    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
+    tol, comparable = _cycle_tolerance(a, b, params)
     err = np.abs(_wrap(offset[:, None] - offset[None, :]))
-    comparable = tol <= 90.0
     agree = comparable & (err <= tol)
     disagree = comparable & ~agree
     weight = np.where(agree, c.confidence[auto][None, :], 0.0).sum(axis=1)
@@ -589,9 +596,7 @@ def half_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
     if auto.size < 4 or half.size == 0:
         return headings, none
     a, b = c.a[auto], c.b[auto]
-    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
-    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
-    comparable = tol <= 90.0
+    tol, comparable = _cycle_tolerance(a, b, params)
     out, overruled = headings.astype(np.float64).copy(), []
     while True:
         offset = _wrap(c.yaw[auto] - (out[b] - out[a]))
