@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from engine.loop_closure import Matches, consistency, one_per_place, tiers
+from engine.loop_closure import GEOMETRY_MARGIN_Z, Matches, consistency, one_per_place, tiers
 from engine.params import MapParams
 
 P = MapParams()
@@ -69,10 +69,26 @@ def test_views_measured_within_a_step_need_only_the_queues_score():
     # only the inliers vouch for it.
     strong = P.auto_inliers * 3
     z = (P.candidate_z + P.auto_geometry_z) / 2
+    near_view = int(strong / (P.auto_measured_share + 0.5 * (1 - P.auto_measured_share)))   # less than a step
     c = matches(a=[0, 30, 60], b=[100, 130, 160], score=[z, z, P.candidate_z - 0.1], inliers=[strong] * 3,
-                ratio=[0.8] * 3, step=[strong - 1] * 3, confidence=[P.candidate_confidence + 10] * 3)
+                ratio=[0.8] * 3, step=[near_view, strong - 1, near_view], confidence=[P.candidate_confidence + 10] * 3)
     c.distance_steps = np.array([0.5 * P.auto_distance_steps, np.nan, 0.5 * P.auto_distance_steps])
     assert tiers(c, P).tolist() == ["auto", "candidate", ""]
+
+
+def test_views_that_measure_within_a_step_and_share_a_full_step_need_only_the_geometry_floor():
+    # A junction's other arm seen from a quarter step away: a low score, but the count and the
+    # measured distance both say one place. Either reading alone, or a score below the floor
+    # at which geometry is looked at, is not enough.
+    strong = P.auto_inliers * 3
+    low = P.candidate_z - GEOMETRY_MARGIN_Z / 2
+    close = 0.3 * P.auto_distance_steps
+    c = matches(a=[0, 30, 60, 90], b=[200, 230, 260, 290],
+                score=[low, low, low, P.candidate_z - GEOMETRY_MARGIN_Z - 0.1], inliers=[strong] * 4, ratio=[0.8] * 4,
+                step=[strong // 2, int(strong / (P.auto_measured_share + 0.1)), strong // 2, strong // 2],
+                confidence=[P.candidate_confidence + 10] * 4)
+    c.distance_steps = np.array([close, close, np.nan, close])
+    assert tiers(c, P).tolist() == ["auto", "", "", ""]
 
 
 def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much_they_share():
