@@ -401,11 +401,10 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     tried the lower score without the share check and each met such a pair: dropped).
     Where both readings say one place, measured within a step and sharing a full step's
     inliers (``auto_step_share``), the score needs only stage 5's floor (``candidate_z`` -
-    ``GEOMETRY_MARGIN_Z``, the score at which stage 4 keeps a match to look at its
-    geometry): a view a quarter
-    of a step from a junction's other arm can score low (other parts of the panorama in
-    view, other light) and share 1.5-2 times a step's inliers. No new number. First family:
-    unchanged (one true pair, its place already found). Second family, looked-at seeds 5-42
+    ``GEOMETRY_MARGIN_Z``, the score at which stage 4 keeps a match to look at its geometry):
+    a view a quarter of a step from a junction's other arm can score low (other parts of the
+    panorama in view, other light) and share 1.5-2 times a step's inliers. No new number.
+    First family: unchanged (one true pair, its place already found). Second family, looked-at seeds 5-42
     and 55-78: 20 more places (888 -> 908 of 1,066), no false loop; three false pairs passed
     stage 7 this way (look-alike places 83-85 m apart, a corridor 6.4 m) and the path checks
     (stages 9, 8, 9b) sent all three back. Held-out seeds 79-84, mapped once: 83 -> 87 of 105,
