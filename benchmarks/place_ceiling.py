@@ -47,7 +47,7 @@ def step_lengths(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.nanmean(np.stack([before, after]), axis=0)
 
 
-def recording_rows(case, descs, poses, params: MapParams):
+def recording_rows(descs, poses, params: MapParams):
     """(closest pair in steps per event, [(true steps, measured steps, metres)] per measured loop)."""
     topomap = run_map(descs, params).topomap
     x, y = (np.asarray(v, float) for v in node_positions(topomap, poses))
@@ -81,7 +81,7 @@ def main() -> None:
     by_route: dict[str, list[float]] = {}
     measured: list[tuple[float, float, float]] = []
     for case, descs, poses, _fps in gen([int(s) for s in args.seeds.split(",")], Path(args.cache)):
-        closest, rows = recording_rows(case, descs, poses, params)
+        closest, rows = recording_rows(descs, poses, params)
         by_route.setdefault(case.route, []).extend(closest)
         measured.extend(rows)
 

@@ -404,11 +404,11 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     ``GEOMETRY_MARGIN_Z``, the score at which stage 4 keeps a match to look at its geometry):
     a view a quarter of a step from a junction's other arm can score low (other parts of the
     panorama in view, other light) and share 1.5-2 times a step's inliers. No new number.
-    First family: unchanged (one true pair, its place already found). Second family, looked-at seeds 5-42
-    and 55-78: 20 more places (888 -> 908 of 1,066), no false loop; three false pairs passed
-    stage 7 this way (look-alike places 83-85 m apart, a corridor 6.4 m) and the path checks
-    (stages 9, 8, 9b) sent all three back. Held-out seeds 79-84, mapped once: 83 -> 87 of 105,
-    no false loop. The same floor with the measured distance alone (share 0.6) met a false
+    First family: unchanged (one true pair, its place already found). Second family,
+    looked-at seeds 5-42 and 55-78: 20 more places (888 -> 908 of 1,066), no false loop; three
+    false pairs passed stage 7 this way (look-alike places 83-85 m apart, a corridor 6.4 m) and
+    the path checks (stages 9, 8, 9b) sent all three back. Held-out seeds 79-84, mapped once:
+    83 -> 87 of 105, no false loop. The same floor with the measured distance alone (share 0.6) met a false
     loop in the ninth round (42 inliers where a step shares 57).
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
@@ -423,16 +423,16 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     apart = c.distance_steps if c.distance_steps is not None else np.full(len(c), np.nan)
     measured_close = ((apart <= params.auto_distance_steps)                            # NaN: no
                       & (c.inliers >= params.auto_measured_share * step))
+    shares_a_step = c.inliers >= params.auto_step_share * step
     one_place = measured_close
     if share_steps:   # the count only where the distance is not measured: a measurement outranks it
-        one_place = one_place | ((c.inliers >= params.auto_step_share * step)
-                                 & ~(apart > params.auto_distance_steps))
+        one_place = one_place | (shares_a_step & ~(apart > params.auto_distance_steps))
     geo_strong = ((c.inliers >= params.auto_inliers) & one_place
                   & ~(plane > params.auto_plane_share))                          # NaN: not flat
 
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
-    both_close = measured_close & (c.inliers >= params.auto_step_share * step)      # count and measure agree
+    both_close = measured_close & shares_a_step                     # count and measure agree
     floor = np.where(both_close, params.candidate_z - GEOMETRY_MARGIN_Z, params.candidate_z)
     auto = ((geo_strong & ((c.score >= params.auto_geometry_z)
                            | (measured_close & (c.score >= floor))))
