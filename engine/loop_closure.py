@@ -444,23 +444,33 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
 def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node_rows: np.ndarray,
             shifts: np.ndarray, frame_width: int, params: MapParams, cache: dict) -> tuple[Matches, np.ndarray]:
     """Stage 7b: a match with ``auto_inliers`` that stage 7 did not make automatic moves to
-    the pair one node beside it (on either end or both) whose two views measure closest
-    (``distance_steps``), when that pair passes stage 7 by its measured distance (score,
-    inliers, plane share and at most ``auto_distance_steps`` apart); it then is that pair.
+    the pair up to ``place_radius`` // 2 nodes beside it (on either end or both) whose two
+    views measure closest (``distance_steps``), when that pair passes stage 7 by its
+    measured distance (score, inliers, measured share, plane share and at most
+    ``auto_distance_steps`` apart); it then is that pair.
 
     Stage 4 keeps of each place the pair with the best descriptor evidence, but where two
-    paths only touch (a crossing, a return offset to one side) the two views closest in
-    space can be one node beside it, and only they are one place. The move is judged by the
-    measured distance alone: moving to the neighbour with the most inliers instead (tried in
-    the third round) made 3 false loops on the first family, pairs one step along a shared
-    stretch sharing more than a step does. On the first family (seeds 0-4) this stage closed
-    one more place and made no false loop. Costs up to eight more two-view fits per such
-    match (cached with the others)."""
+    paths only touch (a crossing, a return offset to one side, a figure eight's lobe end)
+    the two views closest in space can be a node or two beside it, and only they are one
+    place. The reach is half of stage 4's radius, no new number: stage 4 keeps one match
+    per ``place_radius`` nodes, so the pairs within half of it belong to this match rather
+    than to the next one kept. The move is judged by the measured distance alone: moving to
+    the neighbour with the most inliers instead (tried in the third round) made 3 false
+    loops on the first family, pairs one step along a shared stretch sharing more than a
+    step does. One node beside it (rounds 4-10): on the first family one more place, no
+    false loop. Two (eleventh round): first family the same places (42/50, held out 18/20)
+    and a shorter queue (132 -> 86 entries, 119 -> 75 of them false: candidates a step or
+    two off a place now close it), looked-at second family seeds 5-42 555 -> 558/647 and
+    55-96 604 -> 611/723, no new false loop. The seventh round's walk from neighbour to
+    neighbour up to ``place_radius`` met three false loops on a texture repeated along a
+    block (measured 0.22-0.33 steps); stage 7's measured share, added after it, is part of
+    this test. Costs up to 24 more two-view fits per such match (cached with the others)."""
     m = node_rows.size
     todo = np.flatnonzero((status != "auto") & (c.inliers >= params.auto_inliers))
     if features is None or todo.size == 0:
         return c, status
-    da, db = (d.ravel() for d in np.meshgrid([-1, 0, 1], [-1, 0, 1]))
+    reach = np.arange(-(params.place_radius // 2), params.place_radius // 2 + 1)
+    da, db = (d.ravel() for d in np.meshgrid(reach, reach))
     beside = (da != 0) | (db != 0)
     da, db = da[beside], db[beside]
     na, nb = (c.a[todo, None] + da).ravel(), (c.b[todo, None] + db).ravel()

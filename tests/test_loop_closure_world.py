@@ -87,3 +87,18 @@ def test_the_same_scene_one_and_a_half_steps_away_is_not_made_one_place():
         if lc.status == "auto":
             assert np.linalg.norm(path[lc.a] - path[lc.b]) <= 1.0
     assert any(lc.status == "candidate" and crossing in (lc.a, lc.b) for lc in loops)
+
+
+def test_a_crossing_kept_two_nodes_off_moves_to_where_the_two_paths_touch():
+    # The descriptor prefers node 15 of the first leg (x = 12.0, 2.1 m away, two steps past
+    # the closest pair's neighbour); nodes 12 and 13 are 0.3 and 0.5 m away: stage 7b's reach
+    # (half of stage 4's radius) takes the match to them, and nothing further apart is automatic.
+    points, desc = _world()
+    path = _path()
+    crossing = 25 + 12 + 11 + 12 - 1
+    v = _descriptors(path, crossing, look_alike=15)
+    table = _features(path, points, desc)
+    loops = detect_loops(v, MapParams(), node_rows=np.arange(len(path)), features=table)
+    auto = [lc for lc in loops if lc.status == "auto"]
+    assert any(crossing in (lc.a, lc.b) for lc in auto), [(lc.a, lc.b, lc.status) for lc in loops]
+    assert all(np.linalg.norm(path[lc.a] - path[lc.b]) <= 1.0 for lc in auto)
