@@ -467,9 +467,10 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     this test. Costs up to 24 more two-view fits per such match (cached with the others)."""
     m = node_rows.size
     todo = np.flatnonzero((status != "auto") & (c.inliers >= params.auto_inliers))
-    if features is None or todo.size == 0:
+    half = params.place_radius // 2
+    if features is None or todo.size == 0 or half == 0:
         return c, status
-    reach = np.arange(-(params.place_radius // 2), params.place_radius // 2 + 1)
+    reach = np.arange(-half, half + 1)
     da, db = (d.ravel() for d in np.meshgrid(reach, reach))
     beside = (da != 0) | (db != 0)
     da, db = da[beside], db[beside]
