@@ -57,7 +57,9 @@ class PairView(QWidget):
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pair-matches")
         self._closed = False   # set by shutdown: no new background work
         self._pending: set = set()
-        self.matchesReady.connect(self._matches_arrived)
+        # Queued even when emitted in this thread: a pair finished before its done callback is
+        # registered calls back at once, inside refresh, which would then overwrite the matches.
+        self.matchesReady.connect(self._matches_arrived, Qt.QueuedConnection)
         self._image_size = (0, 0)
         self.side_by_side = False
         self.cand_offset = (0.0, 0.0)   # top-left corner of the candidate in view coordinates

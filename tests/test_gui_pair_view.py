@@ -170,3 +170,22 @@ def test_matches_from_the_runs_feature_table(pair, qtbot):
     off = np.abs(inliers[:, 0] - (inliers[:, 1] - np.array([dx, dy])))
     off[:, 0] = np.minimum(off[:, 0], W - off[:, 0])
     assert len(inliers) >= 20 and np.median(off) < 2.0
+
+
+def test_matches_that_finish_before_their_callback_is_registered_are_shown(pair, qtbot):
+    """On a loaded machine the worker can finish a pair before the UI thread registers the
+    done callback, which then runs at once inside the request: the matches must still show."""
+    from concurrent.futures import Future
+
+    view, _, _ = pair
+
+    def run_now(fn, *args):           # the worker at its fastest: done before submit returns
+        future = Future()
+        future.set_result(fn(*args))
+        return future
+
+    view._pool.submit = run_now
+    view.show_pair((0, 15))
+    qtbot.waitUntil(lambda: view.matches is not None or bool(view.match_cache.errors), timeout=10_000)
+    assert view.matches is not None, view.match_cache.errors
+    assert "matching features" not in view.evidence.text()
