@@ -90,8 +90,8 @@ def test_the_same_scene_one_and_a_half_steps_away_is_not_made_one_place():
 
 
 def test_a_crossing_kept_two_nodes_off_moves_to_where_the_two_paths_touch():
-    # The descriptor prefers node 15 of the first leg (x = 12.0, 2.1 m away); nodes 12 and 13,
-    # two and three nodes back, are 0.3 and 0.5 m away: stage 7b's reach (half of stage 4's
+    # The descriptor prefers node 15 of the first leg (x = 12.0, 2.1 m away); nodes 13 and 12,
+    # two and three nodes back, are 0.5 and 0.3 m away: stage 7b's reach (half of stage 4's
     # radius) takes the match to them, and nothing further apart is automatic.
     points, desc = _world()
     path = _path()
