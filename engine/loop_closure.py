@@ -43,7 +43,7 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     goes back to the candidate tier, a candidate is dropped.
 9c. ``look_alikes`` a pair stage 9 sent back is a look-alike: a loop from one of its ends
                     goes back to the candidate tier too when the path puts the loop's
-                    other end at the look-alike instead (two identical rooms).
+                    other end at the look-alike instead (two rooms alike).
 8. ``consistency``  then, of the loops left, relative headings composed around a cycle of
                     path and two loops must close (the PCM idea of Kimera-RPGO): an automatic
                     loop that disagrees with the loops around it goes back to the candidate
@@ -754,12 +754,15 @@ def look_alikes(c: Matches, before: np.ndarray, status: np.ndarray, track: Optio
     of the two places a node can be, dead reckoning picks the nearer, and the loop stays if
     it picks this one. The look-alike's own place must be within stage 9's tolerance of the
     node (a loop to it would pass stage 9), and more than ``place_radius`` nodes from the
-    loop's end on the path (else it is the same pass). Typical: two identical rooms of a
-    corridor driven out and back (the second family's reverse drive, seed 105, rooms 12 m
-    apart): each room on the way out joined to the other on the way back, 0.17 steps apart
-    by geometry, and the two loops agree with each other; the rooms' own pair on the way out
-    is stage 9's look-alike, and the path puts each return node 1-2 steps from its own room
-    and 15 from the other. No new number: stage 9's tolerance and stage 7b's reach."""
+    loop's end on the path (else it is the same pass). Typical: two places 12 m apart that
+    look alike on a corridor driven out and back (the second family's reverse drive, seed
+    105, nodes 23 and 38): each joined on the way out to the other on the way back (23-142,
+    38-157), 0.17 steps apart by geometry, the two loops agreeing with each other, and stage
+    9's tolerance over their 119 steps (73) far wider than the 15 steps they miss by; the
+    places' own pair on the way out (23-38) is stage 9's look-alike, and the path puts each
+    return node 1-2 steps from the look-alike. Stage 9b had kept the two wrong loops and sent
+    back the right one beside them (24-157), less confident. No new number: stage 9's
+    tolerance and stage 7b's reach."""
     out = status.copy()
     alike = np.flatnonzero((before == "auto") & (status != "auto"))
     if track is None or alike.size == 0:

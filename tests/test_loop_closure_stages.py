@@ -204,11 +204,11 @@ def test_a_node_joined_to_two_places_apart_on_the_other_pass_keeps_only_the_more
     assert lengths(c, status, None, P).tolist() == ["auto"] * 4
 
 
-def test_a_return_joined_to_the_copy_of_its_room_goes_to_the_queue_and_the_true_loops_stay():
+def test_a_return_joined_to_a_look_alike_of_its_room_goes_to_the_queue_and_the_true_loops_stay():
     from engine.loop_closure import closure, look_alikes, path_checks
 
     track = _out_and_back(100)      # node i and node 200 - i are one place
-    # Nodes 20 and 35 are two identical rooms on the way out (their pair looks like one place
+    # Nodes 20 and 35 are two rooms alike on the way out (their pair looks like one place
     # and the path says 15 steps apart); on the way back each is joined to the other's room
     # (20-165, 35-180) as well as to its own (20-180, 35-165), and a plain place (50-150).
     c = matches(a=[20, 20, 35, 20, 35, 50], b=[35, 165, 180, 180, 165, 150], score=[8] * 6)
