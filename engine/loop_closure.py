@@ -41,9 +41,6 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     geometry of consecutive nodes, one unit per node step) must meet again,
                     or the loop joins two look-alike places far apart: an automatic loop
                     goes back to the candidate tier, a candidate is dropped.
-9c. ``look_alikes`` a pair stage 9 sent back is a look-alike: a loop from one of its ends
-                    goes back to the candidate tier too when the path puts the loop's
-                    other end at the look-alike instead (two rooms alike).
 8. ``consistency``  then, of the loops left, relative headings composed around a cycle of
                     path and two loops must close (the PCM idea of Kimera-RPGO): an automatic
                     loop that disagrees with the loops around it goes back to the candidate
@@ -741,53 +738,10 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
     return out
 
 
-def look_alikes(c: Matches, before: np.ndarray, status: np.ndarray, track: Optional[np.ndarray],
-                params: MapParams) -> np.ndarray:
-    """Stage 9c: an automatic loop one of whose ends has a look-alike goes back to the
-    candidate tier when the path puts its other end at the look-alike instead.
-
-    A look-alike is what stage 9 found: a pair that stage 7 made automatic (the two views
-    look and fit like one place) and whose path does not come back (it joins two places).
-    Then an end of it can be mistaken for the other, and a loop from that end (within
-    half of ``place_radius`` nodes, stage 7b's stretch of one match) to a node of another
-    pass is right only if the path puts that node nearer to the end than to its look-alike:
-    of the two places a node can be, dead reckoning picks the nearer, and the loop stays if
-    it picks this one. The look-alike's own place must be within stage 9's tolerance of the
-    node (a loop to it would pass stage 9), and more than ``place_radius`` nodes from the
-    loop's end on the path (else it is the same pass). Typical: two places 12 m apart that
-    look alike on a corridor driven out and back (the second family's reverse drive, seed
-    105, nodes 23 and 38): each joined on the way out to the other on the way back (23-142,
-    38-157), 0.17 steps apart by geometry, the two loops agreeing with each other, and stage
-    9's tolerance over their 119 steps (73) far wider than the 15 steps they miss by; the
-    places' own pair on the way out (23-38) is stage 9's look-alike, and the path puts each
-    return node 1-2 steps from the look-alike. Stage 9b had kept the two wrong loops and sent
-    back the right one beside them (24-157), less confident. No new number: stage 9's
-    tolerance and stage 7b's reach."""
-    out = status.copy()
-    alike = np.flatnonzero((before == "auto") & (status != "auto"))
-    if track is None or alike.size == 0:
-        return out
-    reach = params.place_radius // 2
-    ends = np.concatenate([c.a[alike], c.b[alike]])
-    others = np.concatenate([c.b[alike], c.a[alike]])
-    for k in np.flatnonzero(status == "auto"):
-        for end, node in ((c.a[k], c.b[k]), (c.b[k], c.a[k])):
-            sel = (np.abs(ends - end) <= reach) & (np.abs(others - node) > params.place_radius)
-            if not sel.any():
-                continue
-            there = others[sel]
-            own = np.linalg.norm(track[node] - track[end])
-            apart = np.linalg.norm(track[there] - track[node], axis=1)
-            if ((apart < own) & (apart <= reckoning_tolerance(np.abs(there - node), params))).any():
-                out[k] = "candidate"
-    return out
-
-
 def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], track: Optional[np.ndarray],
                 params: MapParams) -> np.ndarray:
-    """Stages 9, 9c, 8 and 9b in this order: each loop alone against its path, then the loops
-    from the ends of the look-alikes stage 9 found, then the headings of the loops that passed
-    against each other, then their lengths.
+    """Stages 9, 8 and 9b in this order: each loop alone against its path, then the headings of
+    the loops that passed against each other, then their lengths.
 
     A loop the path rejects does not vote on headings: look-alike views of a scene that looks
     the same turned round make false loops turned by 180 degrees, all alike, so that together
@@ -797,9 +751,7 @@ def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
     stopped it (seeds 31-42). Kept in the ninth round, with the steps read again as planar
     motion (``_turns_read``) and stage 8a: first family unchanged; seeds 5-30 381/446 with no
     false loop (380 and one with stage 8 first); seeds 31-42 unchanged (169/201)."""
-    before = status
     status = closure(c, status, params)                                # 9
-    status = look_alikes(c, before, status, track, params)            # 9c
     status = consistency(c, status, headings, params)                  # 8
     return lengths(c, status, track, params)                           # 9b
 
@@ -841,7 +793,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     headings, overruled = half_turns(c, status, headings, params)     # 8a
     track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
-    status = path_checks(c, status, headings, track, params)          # 9, 9c, 8, 9b
+    status = path_checks(c, status, headings, track, params)          # 9, 8, 9b
     out = []
     for i in np.flatnonzero(status != ""):
         out.append(LoopCandidate(

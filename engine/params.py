@@ -129,8 +129,7 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("place_radius", int, 4, _NEW,
               "one loop per place: a loop must be the most confident within this many nodes "
               "on both ends (stage 7b may move it by up to half as many to the pair that "
-              "measures closest; stage 9c takes a look-alike within half as many as the "
-              "loop's own end)", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
+              "measures closest)", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
     Parameter("heading_tol", float, 35.0, _NEW,
               "degrees a cycle of path and two loops may miss closing (plus drift along the path)",
               "chosen on the first synthetic family", 0.0, 180.0),

@@ -204,29 +204,6 @@ def test_a_node_joined_to_two_places_apart_on_the_other_pass_keeps_only_the_more
     assert lengths(c, status, None, P).tolist() == ["auto"] * 4
 
 
-def test_a_return_joined_to_a_look_alike_of_its_room_goes_to_the_queue_and_the_true_loops_stay():
-    from engine.loop_closure import closure, look_alikes, path_checks
-
-    track = _out_and_back(100)      # node i and node 200 - i are one place
-    # Nodes 20 and 35 are two rooms alike on the way out (their pair looks like one place
-    # and the path says 15 steps apart); on the way back each is joined to the other's room
-    # (20-165, 35-180) as well as to its own (20-180, 35-165), and a plain place (50-150).
-    c = matches(a=[20, 20, 35, 20, 35, 50], b=[35, 165, 180, 180, 165, 150], score=[8] * 6)
-    c.closure = np.linalg.norm(track[c.b] - track[c.a], axis=1)
-    before = np.array(["auto"] * 6, dtype=object)
-    after_path = closure(c, before, P)
-    assert after_path.tolist() == ["candidate"] + ["auto"] * 5      # only the rooms' own pair fails
-    out = look_alikes(c, before, after_path, track, P)
-    assert out.tolist() == ["candidate", "candidate", "candidate", "auto", "auto", "auto"]
-    # All the path checks together, the wrong loops the more confident (as they were on the
-    # second family's seed 105): the true ones stay, not the wrong ones.
-    c.confidence = np.array([12.0, 10.0, 9.0, 8.0, 8.0, 15.0])
-    assert path_checks(c, before, None, track, P).tolist() == out.tolist()
-    # No look-alike, or no track (no geometry): nothing changes.
-    assert look_alikes(c, after_path, after_path, track, P).tolist() == after_path.tolist()
-    assert look_alikes(c, before, after_path, None, P).tolist() == after_path.tolist()
-
-
 def test_a_place_passed_on_three_laps_keeps_both_of_its_loops():
     from engine.loop_closure import lengths
 
