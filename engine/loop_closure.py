@@ -46,8 +46,8 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     loop that disagrees with the loops around it goes back to the candidate
                     tier (after stage 9, so that loops the path rejects do not vote).
    ``lengths``      and of two loops, the stretches between their ends join the same two
-                    places, so they are equally long: of two automatic loops that cannot
-                    both hold, the less confident goes back to the candidate tier.
+                    places, so they are equally long: two automatic loops that cannot
+                    both hold both go back to the candidate tier.
 
 Expensive results (retrieval, background statistics, geometry) live in ``Descriptors.cache``,
 so re-mapping after a threshold change costs the arithmetic of the stages, not the retrieval
@@ -704,7 +704,7 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
 
 
 def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params: MapParams) -> np.ndarray:
-    """Stage 9b: demote an automatic loop that cannot hold together with a more confident one.
+    """Stage 9b: two automatic loops that cannot hold together both go back to "candidate".
 
     Two loops (a1, b1) and (a2, b2) say that a1 and b1 are one place and a2 and b2 are one
     place, so the path from a1 to a2 and the path from b1 to b2 join the same two places:
@@ -714,27 +714,25 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
     right. Typical: one node joined to two nodes of another pass seven steps apart (a reverse
     drive on the second family, seed 58: the true pair and one 5.9 m off with fewer inliers).
     This is the translation half of the PCM idea, stage 8 being its rotation half; lengths, not
-    vectors, are compared, so the heading between the two passes does not enter. Loops are
-    taken in order of confidence, and one that conflicts with a loop already taken goes back to
-    "candidate" (a person decides). No new number: stage 9's tolerance, chosen on the first
-    synthetic family, where (seeds 0-4) none of the 366 automatic loops conflicts with another.
-    Memory is one row of the taken loops at a time (a large map can hold many loops)."""
+    vectors, are compared, so the heading between the two passes does not enter.
+    Which of the two is wrong the path cannot say, and neither can the evidence: until the
+    twelfth round the more confident loop stayed, which was right on seeds 58 and 104 and
+    wrong on seed 105 (two look-alike rooms 12 m apart, each joined to the other's place with
+    more confidence than the true loop beside them: two false loops in the map). A false loop
+    breaks the map, a true loop in the queue costs a person one click: both go to the queue.
+    No new number: stage 9's tolerance, chosen on the first synthetic family, where (seeds 0-4)
+    none of the 366 automatic loops conflicts with another. Memory is one row of the automatic
+    loops at a time (a large map can hold many loops)."""
     out = status.copy()
     auto = np.flatnonzero(status == "auto")
     if track is None or auto.size < 2:
         return out
-    taken = np.zeros(auto.size, np.int64)
-    count = 0
-    for k in auto[np.argsort(-c.confidence[auto], kind="stable")]:
-        ta, tb = c.a[taken[:count]], c.b[taken[:count]]
-        apart_a = np.linalg.norm(track[ta] - track[c.a[k]], axis=1)
-        apart_b = np.linalg.norm(track[tb] - track[c.b[k]], axis=1)
-        steps = np.abs(ta - c.a[k]) + np.abs(tb - c.b[k])
+    for k in auto:
+        apart_a = np.linalg.norm(track[c.a[auto]] - track[c.a[k]], axis=1)
+        apart_b = np.linalg.norm(track[c.b[auto]] - track[c.b[k]], axis=1)
+        steps = np.abs(c.a[auto] - c.a[k]) + np.abs(c.b[auto] - c.b[k])   # 0 for k itself: never a conflict
         if (np.abs(apart_a - apart_b) > reckoning_tolerance(steps, params)).any():
             out[k] = "candidate"
-        else:
-            taken[count] = k
-            count += 1
     return out
 
 

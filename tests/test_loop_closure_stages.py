@@ -191,15 +191,18 @@ def _out_and_back(steps_out: int) -> np.ndarray:
     return np.stack([steps_out - np.abs(steps_out - i), np.zeros(i.size)], axis=1)
 
 
-def test_a_node_joined_to_two_places_apart_on_the_other_pass_keeps_only_the_more_confident_loop():
+def test_a_node_joined_to_two_places_apart_on_the_other_pass_sends_both_loops_to_the_queue():
     from engine.loop_closure import lengths
 
     track = _out_and_back(100)      # node i and node 200 - i are one place
     # Three true loops along the return, and node 14 joined once more, to node 176: ten steps
-    # away from node 186 on the same pass, so 14 cannot be both places.
-    c = matches(a=[10, 14, 18, 14], b=[190, 186, 182, 176], score=[8, 8, 8, 5], confidence=[8, 8, 8, 5])
-    status = np.array(["auto"] * 4, dtype=object)
-    assert lengths(c, status, track, P).tolist() == ["auto", "auto", "auto", "candidate"]
+    # away from node 186 on the same pass, so 14 cannot be both places. Which is wrong the path
+    # cannot say, and confidence is no judge: the wrong loop is the more confident one here.
+    for conf_true, conf_wrong in ((8, 5), (8, 12)):
+        c = matches(a=[10, 14, 18, 14], b=[190, 186, 182, 176], score=[8, conf_true, 8, conf_wrong],
+                    confidence=[8, conf_true, 8, conf_wrong])
+        status = np.array(["auto"] * 4, dtype=object)
+        assert lengths(c, status, track, P).tolist() == ["auto", "candidate", "auto", "candidate"]
     # Without a track (no geometry) nothing is judged.
     assert lengths(c, status, None, P).tolist() == ["auto"] * 4
 
