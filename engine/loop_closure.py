@@ -727,10 +727,12 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
     auto = np.flatnonzero(status == "auto")
     if track is None or auto.size < 2:
         return out
+    a, b = c.a[auto], c.b[auto]
+    at_a, at_b = track[a], track[b]
     for k in auto:
-        apart_a = np.linalg.norm(track[c.a[auto]] - track[c.a[k]], axis=1)
-        apart_b = np.linalg.norm(track[c.b[auto]] - track[c.b[k]], axis=1)
-        steps = np.abs(c.a[auto] - c.a[k]) + np.abs(c.b[auto] - c.b[k])   # 0 for k itself: never a conflict
+        apart_a = np.linalg.norm(at_a - track[c.a[k]], axis=1)
+        apart_b = np.linalg.norm(at_b - track[c.b[k]], axis=1)
+        steps = np.abs(a - c.a[k]) + np.abs(b - c.b[k])   # 0 for k itself: never a conflict
         if (np.abs(apart_a - apart_b) > reckoning_tolerance(steps, params)).any():
             out[k] = "candidate"
     return out
