@@ -41,6 +41,9 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
                     geometry of consecutive nodes, one unit per node step) must meet again,
                     or the loop joins two look-alike places far apart: an automatic loop
                     goes back to the candidate tier, a candidate is dropped.
+9a. ``lone_turns``  a loop whose path comes back only through a step read as a half turn,
+                    a turn no other loop needs, goes back to the candidate tier: a straight
+                    step in a corridor alike both ways can read as one and fold the path.
 8. ``consistency``  then, of the loops left, relative headings composed around a cycle of
                     path and two loops must close (the PCM idea of Kimera-RPGO): an automatic
                     loop that disagrees with the loops around it goes back to the candidate
@@ -703,6 +706,55 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     return out
 
 
+def straightened_tracks(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
+                        headings: np.ndarray, cache: dict, overruled: np.ndarray,
+                        params: MapParams) -> dict[int, np.ndarray]:
+    """For each step the path reads as a half turn (within ``heading_tol`` of 180 degrees; not
+    one stage 8a overruled), the dead-reckoned track (``path_track``) with that step read
+    straight instead: what stage 9a compares each loop's closure with."""
+    out = {}
+    for k in np.flatnonzero(np.abs(_wrap(np.diff(headings))) >= 180.0 - params.heading_tol):
+        if k in overruled:
+            continue
+        turned_back = headings.copy()
+        turned_back[k + 1:] -= 180.0
+        track = path_track(features, node_rows, shifts, frame_width, turned_back, cache, np.append(overruled, k))
+        if track is not None:
+            out[int(k)] = track
+    return out
+
+
+def lone_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], straightened: dict[int, np.ndarray],
+               params: MapParams) -> np.ndarray:
+    """Stage 9a: an automatic loop whose path comes back only through a half turn that no
+    other loop needs goes back to "candidate".
+
+    A step read as a half turn (within ``heading_tol`` of 180 degrees, as stage 8a) is the
+    one reading of the path that two views of a symmetric scene cannot settle: a straight
+    step in a corridor that looks the same both ways fits a model turned round as well as
+    the right one (stage 8a), and the planar reading agrees with it. Every position after
+    such a step is then folded back, and a pair of look-alike views far apart along a
+    straight corridor seems to close (the second family's held-out seeds 139-144: a
+    crossing's nodes 24 m apart, dead reckoning putting them 2.2 steps apart through one
+    misread step). ``straightened`` holds, for each half-turn step, the dead-reckoned
+    track with that step read straight (``straightened_tracks``). A loop that closes (stage 9) with the turn and not
+    without it needs the turn; a real turn on the spot (a reverse drive's U-turn) is needed
+    by every loop across it, so the turn stands when at least two loops need it, and a lone
+    loop cannot keep a doubtful turn to fit itself (stage 8a's rule turned round: two, the
+    least that is a majority of more than one voice). No new number."""
+    out = status.copy()
+    if headings is None or not straightened:
+        return out
+    auto = (status == "auto") & np.isfinite(c.closure)
+    tol = reckoning_tolerance(c.b - c.a, params)
+    for k, track in straightened.items():
+        without = np.linalg.norm(track[c.b] - track[c.a], axis=1)
+        needs = auto & (c.a <= k) & (k < c.b) & (c.closure <= tol) & (without > tol)
+        if needs.sum() < 2:
+            out[needs] = "candidate"
+    return out
+
+
 def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params: MapParams) -> np.ndarray:
     """Stage 9b: two automatic loops that cannot hold together both go back to "candidate".
 
@@ -739,9 +791,10 @@ def lengths(c: Matches, status: np.ndarray, track: Optional[np.ndarray], params:
 
 
 def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], track: Optional[np.ndarray],
-                params: MapParams) -> np.ndarray:
-    """Stages 9, 8 and 9b in this order: each loop alone against its path, then the headings of
-    the loops that passed against each other, then their lengths.
+                params: MapParams, straightened: Optional[dict[int, np.ndarray]] = None) -> np.ndarray:
+    """Stages 9, 9a, 8 and 9b in this order: each loop alone against its path (``straightened``:
+    the path with each half turn read straight, for stage 9a), then the headings of the loops
+    that passed against each other, then their lengths.
 
     A loop the path rejects does not vote on headings: look-alike views of a scene that looks
     the same turned round make false loops turned by 180 degrees, all alike, so that together
@@ -752,6 +805,7 @@ def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
     motion (``_turns_read``) and stage 8a: first family unchanged; seeds 5-30 381/446 with no
     false loop (380 and one with stage 8 first); seeds 31-42 unchanged (169/201)."""
     status = closure(c, status, params)                                # 9
+    status = lone_turns(c, status, headings, straightened, params)     # 9a
     status = consistency(c, status, headings, params)                  # 8
     return lengths(c, status, track, params)                           # 9b
 
@@ -793,7 +847,9 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     headings, overruled = half_turns(c, status, headings, params)     # 8a
     track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
-    status = path_checks(c, status, headings, track, params)          # 9, 8, 9b
+    straightened = straightened_tracks(features, node_rows, shifts, frame_width, headings, cache, overruled,
+                                       params) if track is not None else {}
+    status = path_checks(c, status, headings, track, params, straightened)   # 9, 9a, 8, 9b
     out = []
     for i in np.flatnonzero(status != ""):
         out.append(LoopCandidate(
