@@ -724,7 +724,7 @@ def straightened_tracks(features, node_rows: np.ndarray, shifts: np.ndarray, fra
     return out
 
 
-def lone_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], straightened: dict[int, np.ndarray],
+def lone_turns(c: Matches, status: np.ndarray, straightened: Optional[dict[int, np.ndarray]],
                params: MapParams) -> np.ndarray:
     """Stage 9a: an automatic loop whose path comes back only through a half turn that no
     other loop needs goes back to "candidate".
@@ -743,7 +743,7 @@ def lone_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], s
     loop cannot keep a doubtful turn to fit itself (stage 8a's rule turned round: two, the
     least that is a majority of more than one voice). No new number."""
     out = status.copy()
-    if headings is None or not straightened:
+    if not straightened:     # no geometry, or no step read as a half turn
         return out
     auto = (status == "auto") & np.isfinite(c.closure)
     tol = reckoning_tolerance(c.b - c.a, params)
@@ -805,7 +805,7 @@ def path_checks(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
     motion (``_turns_read``) and stage 8a: first family unchanged; seeds 5-30 381/446 with no
     false loop (380 and one with stage 8 first); seeds 31-42 unchanged (169/201)."""
     status = closure(c, status, params)                                # 9
-    status = lone_turns(c, status, headings, straightened, params)     # 9a
+    status = lone_turns(c, status, straightened, params)               # 9a
     status = consistency(c, status, headings, params)                  # 8
     return lengths(c, status, track, params)                           # 9b
 

@@ -274,11 +274,12 @@ def test_a_lone_loop_that_closes_only_through_a_doubtful_half_turn_goes_to_the_q
     # A straight corridor of 200 steps whose step 100 was read as a half turn: dead reckoning
     # folds the path back, so nodes 60 and 140 (look-alike views 80 steps apart) seem to meet.
     folded = _out_and_back(100)
-    headings = _out_and_back_headings()
     c = matches(a=[60], b=[140], score=[8])
     c.closure = np.linalg.norm(folded[c.b] - folded[c.a], axis=1)
     status = np.array(["auto"], dtype=object)
-    assert lone_turns(c, status, headings, {100: _straight_track(200)}, P).tolist() == ["candidate"]
+    assert lone_turns(c, status, {100: _straight_track(200)}, P).tolist() == ["candidate"]
+    # Without a half turn read (or without geometry) nothing is judged.
+    assert lone_turns(c, status, {}, P).tolist() == ["auto"]
 
 
 def test_a_real_u_turn_needed_by_the_loops_of_the_return_keeps_them_all():
@@ -290,9 +291,8 @@ def test_a_real_u_turn_needed_by_the_loops_of_the_return_keeps_them_all():
     c = matches(a=[20, 50, 80], b=[180, 150, 120], score=[8] * 3)
     c.closure = np.linalg.norm(track[c.b] - track[c.a], axis=1)
     status = np.array(["auto"] * 3, dtype=object)
-    assert lone_turns(c, status, _out_and_back_headings(), {100: _straight_track(200)}, P).tolist() == ["auto"] * 3
+    assert lone_turns(c, status, {100: _straight_track(200)}, P).tolist() == ["auto"] * 3
     # A loop whose path does not run over the turn is not judged by it.
     c = matches(a=[10], b=[40], score=[8])
     c.closure = np.array([0.5])
-    assert lone_turns(c, np.array(["auto"], dtype=object), _out_and_back_headings(), {100: _straight_track(200)},
-                      P).tolist() == ["auto"]
+    assert lone_turns(c, np.array(["auto"], dtype=object), {100: _straight_track(200)}, P).tolist() == ["auto"]
