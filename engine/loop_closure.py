@@ -593,6 +593,12 @@ def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], 
     return out
 
 
+def half_turn_steps(headings: np.ndarray, params: MapParams) -> np.ndarray:
+    """Path steps (k: node k to k + 1) read as a half turn, within ``heading_tol`` of 180
+    degrees: the reading stages 8a and 9a both doubt."""
+    return np.flatnonzero(np.abs(_wrap(np.diff(headings))) >= 180.0 - params.heading_tol)
+
+
 def half_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
                params: MapParams) -> tuple[Optional[np.ndarray], np.ndarray]:
     """Stage 8a: path steps whose half turn the loops overrule; the headings without it, and
@@ -620,7 +626,7 @@ def half_turns(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
     if headings is None or headings.size < 2:
         return headings, none
     auto = np.flatnonzero((status == "auto") & np.isfinite(c.yaw))
-    half = np.flatnonzero(np.abs(_wrap(np.diff(headings))) >= 180.0 - params.heading_tol)
+    half = half_turn_steps(headings, params)
     if auto.size < 4 or half.size == 0:
         return headings, none
     a, b = c.a[auto], c.b[auto]
@@ -709,11 +715,11 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
 def straightened_tracks(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
                         headings: np.ndarray, cache: dict, overruled: np.ndarray,
                         params: MapParams) -> dict[int, np.ndarray]:
-    """For each step the path reads as a half turn (within ``heading_tol`` of 180 degrees; not
-    one stage 8a overruled), the dead-reckoned track (``path_track``) with that step read
+    """For each step the path reads as a half turn (``half_turn_steps``; not one stage 8a
+    overruled), the dead-reckoned track (``path_track``) with that step read
     straight instead: what stage 9a compares each loop's closure with."""
     out = {}
-    for k in np.flatnonzero(np.abs(_wrap(np.diff(headings))) >= 180.0 - params.heading_tol):
+    for k in half_turn_steps(headings, params):
         if k in overruled:
             continue
         turned_back = headings.copy()
@@ -737,11 +743,12 @@ def lone_turns(c: Matches, status: np.ndarray, straightened: Optional[dict[int, 
     straight corridor seems to close (the second family's held-out seeds 139-144: a
     crossing's nodes 24 m apart, dead reckoning putting them 2.2 steps apart through one
     misread step). ``straightened`` holds, for each half-turn step, the dead-reckoned
-    track with that step read straight (``straightened_tracks``). A loop that closes (stage 9) with the turn and not
-    without it needs the turn; a real turn on the spot (a reverse drive's U-turn) is needed
-    by every loop across it, so the turn stands when at least two loops need it, and a lone
-    loop cannot keep a doubtful turn to fit itself (stage 8a's rule turned round: two, the
-    least that is a majority of more than one voice). No new number."""
+    track with that step read straight (``straightened_tracks``). A loop that closes (stage
+    9) with the turn and not without it needs the turn; a real turn on the spot (a reverse
+    drive's U-turn) is needed by every loop across it, so the turn stands when at least two
+    loops need it, and a lone loop cannot keep a doubtful turn to fit itself (stage 8a's
+    rule turned round: two, the least that is a majority of more than one voice). No new
+    number."""
     out = status.copy()
     if not straightened:     # no geometry, or no step read as a half turn
         return out
