@@ -60,7 +60,7 @@ class _Bar:
 def _descriptor_options(args: argparse.Namespace) -> dict:
     """Descriptor-specific options given on the command line (only those set)."""
     names = ("weights", "vocabulary", "backbone", "layer", "facet", "device", "batch_size", "input_height", "pca_dim",
-             "precision", "phases")
+             "precision", "phases", "photometric")
     opts = {n: getattr(args, n) for n in names if getattr(args, n, None) is not None}
     if getattr(args, "allow_download", False):
         opts["allow_download"] = True
@@ -317,6 +317,10 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     g.add_argument("--phases", type=int, help="effnet-vlad: pool the features of this many rolls of the panorama "
                    "within one feature stride (1, 2, 4, 8, 16; default 1): steadier under heading changes, "
                    "that many times the network's cost")
+    g.add_argument("--photometric", choices=("none", "standardise"),
+                   help="effnet-vlad: 'standardise' gives the network each frame with its colour channels at zero "
+                   "mean and unit spread, so that exposure and white balance changes between visits count less "
+                   "(default none)")
     p.add_argument("--skip-bad-frames", action="store_true",
                    help="skip frames that cannot be decoded (and say how many) instead of stopping")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the descriptor cache")

@@ -249,6 +249,32 @@ def test_phases_keep_a_real_panorama_under_a_half_stride_roll(full):
         registry.get("effnet-vlad", phases=3)
 
 
+def test_photometric_standardise_ignores_exposure_and_white_balance(full):
+    # Another exposure and white balance of the same real panorama (a gain and an offset per
+    # channel, kept inside 0-255 so nothing clips) is the same frame to the network once each
+    # frame's channels are standardised; to the plain input it is not. The network's local
+    # features say it directly; the pooled descriptor follows (less exactly: a one-frame
+    # vocabulary of 32 words over 128 features amplifies small changes).
+    img = cv2.resize(full, (256, 128), interpolation=cv2.INTER_AREA).astype(np.float32)
+    relit = np.clip(img * np.array([0.55, 0.7, 0.45]) + np.array([90.0, 60.0, 110.0]), 0, 255)
+    frames = [img.astype(np.uint8), relit.round().astype(np.uint8)]
+    local, pooled = {}, {}
+    for photometric in ("none", "standardise"):
+        vocab = registry.get("effnet-vlad", photometric=photometric, **SMALL)
+        f = vocab.local_features(frames)
+        local[photometric] = float((f[0] * f[1]).sum(-1).median())
+        vocab.describe(iter(frames[:1]), 1)
+        fixed = registry.get("effnet-vlad", photometric=photometric, vocabulary=vocab.vocabulary, **SMALL)
+        a, b = fixed.describe(iter(frames), 2)
+        pooled[photometric] = float(a @ b)
+    assert local["standardise"] > 0.99 > local["none"]
+    assert pooled["standardise"] > pooled["none"]
+    assert registry.get("effnet-vlad", photometric="standardise", **SMALL).settings()["photometric"] == "standardise"
+    assert "photometric" not in registry.get("effnet-vlad", **SMALL).settings()   # old caches stay valid
+    with pytest.raises(InputError, match="photometric must be one of none, standardise, got 'auto'"):
+        registry.get("effnet-vlad", photometric="auto")
+
+
 def test_empty_input():
     model = registry.get("effnet-vlad", **SMALL)
     out = model.describe(iter([]), 0)

@@ -26,6 +26,10 @@ unrelated place grew from 0.19 to 0.21-0.22 (n = 2) and 0.23-0.25 (n = 4)
 (``benchmarks/bench_real_descriptor.py --rolls-only --phases 1 2 4``, results/real_descriptor.md;
 four pairs of one walk: a direction, not a calibration). It costs n network passes; 1 stays
 the default because every calibrated number and benchmark recording was made with it.
+Photometric (``photometric``, default "none"): "standardise" gives the network each frame with
+its channels at zero mean and unit spread (``accel.standardise``), so that another exposure or
+white balance at the same place changes nothing; "none" stays the default for now for the same
+reason as ``phases`` (fifteenth round: benchmarks/results/photometric.md).
 torch is imported lazily so that the registry and ``defaults`` stay cheap.
 """
 
@@ -165,7 +169,12 @@ class EfficientNetVLAD(DescriptorModel):
         sectors: int = 4,
         precision: str = "auto",
         phases: int = 1,
+        photometric: str = "none",
     ) -> None:
+        from .accel import PHOTOMETRIC
+
+        if photometric not in PHOTOMETRIC:
+            raise InputError(f"effnet-vlad: photometric must be one of {', '.join(PHOTOMETRIC)}, got '{photometric}'")
         if int(phases) not in PHASES:
             raise InputError(f"effnet-vlad: phases must be one of {', '.join(map(str, PHASES))}, got {phases}")
         if layout not in LAYOUTS:
@@ -193,6 +202,7 @@ class EfficientNetVLAD(DescriptorModel):
         self.layout = layout
         self.sectors = int(sectors) if layout == "sectors" else 0
         self.phases = int(phases)
+        self.photometric = photometric
         # Per instance: the class attribute keeps the default configuration's thresholds.
         measured = min((h for lay, h in self.CALIBRATED if lay == layout), key=lambda h: abs(h - self.input_height))
         self.defaults = dict(self.CALIBRATED[(layout, measured)])
@@ -238,6 +248,7 @@ class EfficientNetVLAD(DescriptorModel):
             "seed": self.seed,
             "layout": self.layout,
             **({"phases": self.phases} if self.phases > 1 else {}),
+            **({"photometric": self.photometric} if self.photometric != "none" else {}),
             # Autocast changes the numbers (within the tolerances of docs/gpu.md); the device does not.
             "precision": "float32" if self.dtype is None else str(self.dtype).removeprefix("torch."),
             **({"sectors": self.sectors, "sector_halfwidth_deg": SECTOR_HALFWIDTH_DEG,
@@ -261,11 +272,13 @@ class EfficientNetVLAD(DescriptorModel):
         import torch
         import torch.nn.functional as F
 
-        from .accel import compute, to_network_input
+        from .accel import compute, standardise, to_network_input
 
         model = self.network()
         size = (self.input_height, self.input_width)
         x = to_network_input(batch, size, size, self.device, "effnet-vlad")
+        if self.photometric == "standardise":
+            x = standardise(x)
         if self.phases > 1:   # the panorama rolled by 1/phases of a stride each (see the module notes)
             x = torch.cat([torch.roll(x, FEATURE_STRIDE * k // self.phases, dims=3) for k in range(self.phases)])
         with compute(self.device, self.dtype):
