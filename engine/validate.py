@@ -232,6 +232,7 @@ ALLOWED_OPTIONS: dict[str, dict] = {
         "layout": _str_choice(("global", "sectors")), "sectors": _int(2, 16),
         "seed": _int(0, limits.MAX_SEED), "threads": _int(1, 1024),
         "phases": _int(1, 16),   # the model names the allowed values (1, 2, 4, 8, 16)
+        "photometric": _str_choice(("none", "standardise")),
     },
     "anyloc-vlad": {**_ANYLOC_COMMON, "vocabulary": _vocabulary, "num_clusters": _int(1, 1024)},
     "anyloc-gem": {**_ANYLOC_COMMON, "gem_p": lambda v, n: number(v, n, above=0.0, hi=100.0)},

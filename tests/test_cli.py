@@ -101,6 +101,21 @@ def test_describe_then_map_from_npz_gives_the_same_map(recording, tmp_path, cach
     assert sorted(map(sorted, ga.edges)) == sorted(map(sorted, gb.edges))
 
 
+def test_photometric_option_reaches_the_descriptor_and_its_cache_key(recording, tmp_path, cache_dir, capsys):
+    # The option is a descriptor setting: it is written into the file's meta, and a cached
+    # description made without it is not reused for it (the cache key covers every setting).
+    _, files = recording
+    plain, standardised = tmp_path / "plain.npz", tmp_path / "std.npz"
+    assert run_cli(capsys, "describe", files["video"], "-o", plain, *FAST, *cache_dir)[0] == 0
+    code, _, err = run_cli(capsys, "describe", files["video"], "-o", standardised, "--photometric", "standardise",
+                           *FAST, *cache_dir)
+    assert code == 0, err
+    with np.load(plain) as a, np.load(standardised) as b:
+        settings = [json.loads(str(z["meta"]))["settings"] for z in (a, b)]
+        assert "photometric" not in settings[0] and settings[1]["photometric"] == "standardise"
+        assert not np.allclose(a["descriptors"], b["descriptors"])
+
+
 def test_auto_thresholds_calibrate_what_the_user_left_unset(recording, tmp_path, cache_dir, capsys):
     from engine.calibrate import paper_thresholds
     from engine.descriptors.base import Descriptors
