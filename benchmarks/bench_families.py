@@ -19,6 +19,8 @@ Recordings are 256x128 at 1 frame/s, the default descriptor at input height 128,
 and descriptors cached under --cache. A *false loop* joins nodes more than 1 m apart (or
 temporal neighbours); an *event* is one place the robot came back to, found when one of its
 same-place pairs is a loop. "with candidates" counts what a person reviewing the queue sees.
+``--photometric standardise`` describes with that effnet-vlad option (cached beside the plain
+descriptors under another name; a recording already cached one way is rendered again).
 """
 
 from __future__ import annotations
@@ -61,13 +63,25 @@ class FamilyCase:
         return f"{self.family}_{self.route}_{self.look}_s{self.seed}"
 
 
+# effnet-vlad's ``photometric`` option for every recording of this run (``--photometric``).
+PHOTOMETRIC = {"value": "none"}
+
+
+def cache_path(cache: Path, name: str, input_height: int = 128) -> Path:
+    """Where ``describe_rgb`` keeps the descriptors of recording ``name`` (with this run's options)."""
+    photometric = PHOTOMETRIC["value"]
+    return cache / f"{name}_h{input_height}{'' if photometric == 'none' else '_' + photometric}.npz"
+
+
 def describe_rgb(frames, stamps, name: str, cache: Path, input_height: int = 128) -> tuple[Descriptors, float]:
-    """Descriptors (with features) of in-memory frames, cached as ``cache/name.npz``."""
-    path = cache / f"{name}_h{input_height}.npz"
+    """Descriptors (with features) of in-memory frames, cached as ``cache_path``."""
+    photometric = PHOTOMETRIC["value"]
+    path = cache_path(cache, name, input_height)
     if path.is_file():
         d = Descriptors.load(path)
         return d, float(d.meta.get("bench_fps", 0.0))
-    settings = DescribeSettings(interval=1.0, options={"input_height": input_height})
+    options = {"input_height": input_height, **({} if photometric == "none" else {"photometric": photometric})}
+    settings = DescribeSettings(interval=1.0, options=options)
     items = (Frame(k, float(t), rgb) for k, (t, rgb) in enumerate(zip(stamps, frames)))
     t0 = time.perf_counter()
     d = describe_frames(items, len(stamps), settings, source=name)
@@ -89,7 +103,7 @@ def first_family(seeds, cache: Path):
                 c = case_for(route, look, seed)
                 case = FamilyCase("first", route, look, seed, c.people)
                 poses = c.poses()
-                path = cache / f"{case.name}_h128.npz"
+                path = cache_path(cache, case.name)
                 if path.is_file():
                     d, fps = describe_rgb(None, None, case.name, cache)
                 else:
@@ -108,7 +122,7 @@ def second_family(seeds, cache: Path):
             poses = synth2.poses_for(route, seed)
             look = "second"
             case = FamilyCase("second", route, look, seed)
-            path = cache / f"{case.name}_h128.npz"
+            path = cache_path(cache, case.name)
             if path.is_file():
                 d, fps = describe_rgb(None, None, case.name, cache)
             else:
@@ -241,7 +255,10 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a map parameter (tuning on the first family only)")
     ap.add_argument("--out", help="also write the table to benchmarks/results/NAME")
+    ap.add_argument("--photometric", choices=("none", "standardise"), default="none",
+                    help="effnet-vlad's photometric option for the descriptors (default none)")
     args = ap.parse_args()
+    PHOTOMETRIC["value"] = args.photometric
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     methods = tuple(m for m in args.methods.split(",") if m)
     from engine.params import BY_NAME
