@@ -665,9 +665,9 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     step before is kept (a robot keeps moving the way it moved); so too at the ``overruled``
     steps (stage 8a: their model was the wrong one). On the first synthetic
     family (seeds 0-4) the path between the two visits of a place missed meeting by at
-    most 0.53 of its length when they were chosen (one wrong turn indoors; 0.37 with the ninth
-    round's planar step reading) and 2 steps on short returns: the numbers of
-    ``closure_rate`` and ``closure_slack``."""
+    most 0.53 of its length when they were chosen (one wrong turn indoors; 0.37 with this
+    reckoning, re-measured in the fifteenth round) and 2 steps on short returns: the numbers
+    of ``closure_rate`` and ``closure_slack``."""
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
