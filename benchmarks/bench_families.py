@@ -38,6 +38,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from engine.benchmark import Row, score_map  # noqa: E402
 from engine.descriptors.base import Descriptors  # noqa: E402
+from engine.descriptors.efficientnet import PHOTOMETRIC as PHOTOMETRIC_CHOICES  # noqa: E402
 from engine.frames import Frame  # noqa: E402
 from engine.params import MapParams  # noqa: E402
 from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
@@ -255,7 +256,7 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a map parameter (tuning on the first family only)")
     ap.add_argument("--out", help="also write the table to benchmarks/results/NAME")
-    ap.add_argument("--photometric", choices=("none", "standardise"), default="none",
+    ap.add_argument("--photometric", choices=PHOTOMETRIC_CHOICES, default="none",
                     help="effnet-vlad's photometric option for the descriptors (default none)")
     args = ap.parse_args()
     PHOTOMETRIC["value"] = args.photometric

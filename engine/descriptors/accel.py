@@ -11,7 +11,7 @@
 * ``to_network_input``: uint8 RGB frames -> normalised float32 network input on the device,
   resized there (the host only copies bytes), or on the host where the device is the CPU and
   the frame shrinks by whole factors (``shrink_on_host``: the same block means, 9x faster).
-* ``standardise``: each image's channels to zero mean and unit spread (``photometric`` option).
+* ``standardise``: each image's channels to zero mean and unit spread (effnet-vlad's ``photometric`` option).
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ import torch.nn.functional as F
 from ..errors import InputError
 
 PRECISIONS = ("auto", "float32", "bfloat16", "float16")
-PHOTOMETRIC = ("none", "standardise")   # the ``photometric`` option of a descriptor (see ``standardise``)
 FLAT_STD = 1e-3   # spread below which a channel counts as flat (a uniform frame): not divided by
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)

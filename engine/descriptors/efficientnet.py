@@ -61,6 +61,7 @@ VOCAB_SAMPLE = 100_000
 VERSION = 3  # bump when the computation changes, so caches are invalidated
 FEATURE_STRIDE = 16   # input pixels per feature column; both stages are at stride 16
 PHASES = (1, 2, 4, 8, 16)   # sub-stride rolls that divide the stride
+PHOTOMETRIC = ("none", "standardise")   # input before the network (see the module notes)
 # Spatial layouts of the pooled vector (see the module docstring).
 LAYOUTS = ("global", "sectors")
 # Sector windows: raised cosine of this half-width in degrees (neighbouring sectors of
@@ -171,8 +172,6 @@ class EfficientNetVLAD(DescriptorModel):
         phases: int = 1,
         photometric: str = "none",
     ) -> None:
-        from .accel import PHOTOMETRIC
-
         if photometric not in PHOTOMETRIC:
             raise InputError(f"effnet-vlad: photometric must be one of {', '.join(PHOTOMETRIC)}, got '{photometric}'")
         if int(phases) not in PHASES:
