@@ -19,8 +19,11 @@ Recordings are 256x128 at 1 frame/s, the default descriptor at input height 128,
 and descriptors cached under --cache. A *false loop* joins nodes more than 1 m apart (or
 temporal neighbours); an *event* is one place the robot came back to, found when one of its
 same-place pairs is a loop. "with candidates" counts what a person reviewing the queue sees.
-``--photometric standardise`` describes with that effnet-vlad option (cached beside the plain
-descriptors under another name; a recording already cached one way is rendered again).
+Each method is mapped on the descriptors it asks for (``MapParams.describe_options``:
+``verified`` with effnet-vlad's ``photometric=standardise``, the others plain), described once
+per kind and cached beside each other (``*_h128.npz``, ``*_h128_standardise.npz``; a recording
+cached one way only is rendered again); ``--photometric none|standardise`` gives every method
+that one kind.
 """
 
 from __future__ import annotations
@@ -64,7 +67,9 @@ class FamilyCase:
         return f"{self.family}_{self.route}_{self.look}_s{self.seed}"
 
 
-# effnet-vlad's ``photometric`` option for every recording of this run (``--photometric``).
+# effnet-vlad's ``photometric`` option of the recordings described now: ``main`` sets it per
+# group of methods (``photometric_groups``); scripts that read this cache for one method set it
+# with ``photometric_for``.
 PHOTOMETRIC = {"value": "none"}
 
 
@@ -247,6 +252,20 @@ def by_closest(rows: list[Row], method: str) -> str:
     return "".join(head) + "\n|---|---|" + "---|" * len(cells) + f"\n| {fam} | {method} |" + "".join(cells)
 
 
+def photometric_for(method: str, forced=None) -> str:
+    """effnet-vlad's ``photometric`` option ``method`` is mapped with: ``forced``, else the
+    method's own (``MapParams.describe_options``)."""
+    return forced or MapParams(method=method).describe_options.get("photometric", "none")
+
+
+def photometric_groups(methods, forced=None) -> dict[str, list[str]]:
+    """Methods by the ``photometric_for`` value they are mapped with (described once per value)."""
+    groups: dict[str, list[str]] = {}
+    for m in methods:
+        groups.setdefault(photometric_for(m, forced), []).append(m)
+    return groups
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--family", choices=("first", "second", "real"), required=True)
@@ -256,10 +275,10 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a map parameter (tuning on the first family only)")
     ap.add_argument("--out", help="also write the table to benchmarks/results/NAME")
-    ap.add_argument("--photometric", choices=PHOTOMETRIC_CHOICES, default="none",
-                    help="effnet-vlad's photometric option for the descriptors (default none)")
+    ap.add_argument("--photometric", choices=PHOTOMETRIC_CHOICES,
+                    help="effnet-vlad's photometric option for every method's descriptors "
+                         "(default: what each method asks for)")
     args = ap.parse_args()
-    PHOTOMETRIC["value"] = args.photometric
     seeds = [int(s) for s in args.seeds.split(",") if s.strip()]
     methods = tuple(m for m in args.methods.split(",") if m)
     from engine.params import BY_NAME
@@ -268,8 +287,12 @@ def main() -> None:
     for item in args.set:
         k, v = item.split("=", 1)
         params[k] = BY_NAME[k].type(v)
-    rows = run(args.family, seeds, methods, Path(args.cache), params)
-    text = table(rows, methods)
+    rows, groups = [], photometric_groups(methods, args.photometric)
+    for photometric, group in groups.items():   # described once per kind
+        PHOTOMETRIC["value"] = photometric
+        rows += run(args.family, seeds, group, Path(args.cache), params)
+    text = "effnet-vlad photometric: " + "; ".join(f"{', '.join(g)}: {v}" for v, g in groups.items()) + "\n\n"
+    text += table(rows, methods)
     if args.family != "real":
         text += ("\n\nRevisits found automatically, by how close the two visits came (closest same-place pair):\n\n"
                  + "\n\n".join(by_closest(rows, m) for m in methods))

@@ -61,7 +61,7 @@ def run(seeds, methods, cache: Path, input_height: int) -> list[Row]:
             for look in LOOKS:
                 case = case_for(route, look, seed)
                 t0 = time.perf_counter()
-                d = describe_case(case, (True, False), input_height=input_height, cache_dir=cache)
+                d = describe_case(case, (True, False), input_height=input_height, cache_dir=cache, methods=methods)
                 rows += evaluate_methods(d, methods, calibrated_params(d, methods))
                 print(f"{case.name}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     return rows

@@ -49,6 +49,7 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/panotopo-families")
     ap.add_argument("--key", default="plane_share")
     args = ap.parse_args()
+    bf.PHOTOMETRIC["value"] = bf.photometric_for("verified")   # the descriptors verified asks for
     gen = bf.first_family if args.family == "first" else bf.second_family
     rows = list(loop_rows(gen([int(s) for s in args.seeds.split(",")], Path(args.cache)), MapParams()))
     print(f"{args.key} of {args.family} family seeds {args.seeds} (right: ends within {SAME_PLACE_M:g} m)\n")

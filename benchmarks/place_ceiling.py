@@ -15,7 +15,7 @@ The two meet only through the node step's length in metres, which the method doe
    candidates) whose distance was measured: measured steps over true steps, by band of true
    steps, and the loops more than 1 m apart that measure within each threshold.
 
-Reads the recordings of ``bench_families.py``'s cache (``--methods ours`` renders them).
+Reads the recordings of ``bench_families.py``'s cache (``--methods verified`` renders them).
 """
 
 from __future__ import annotations
@@ -76,6 +76,7 @@ def main() -> None:
     ap.add_argument("--seeds", default="0")
     ap.add_argument("--cache", default="/tmp/panotopo-families")
     args = ap.parse_args()
+    bf.PHOTOMETRIC["value"] = bf.photometric_for("verified")   # the descriptors verified asks for
     gen = bf.first_family if args.family == "first" else bf.second_family
     params = MapParams(method="verified", neighbor_node_num=5)
     by_route: dict[str, list[float]] = {}

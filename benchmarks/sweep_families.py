@@ -31,6 +31,7 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/panotopo-families")
     ap.add_argument("--grid", action="append", default=[], metavar="NAME=V1,V2")
     args = ap.parse_args()
+    bf.PHOTOMETRIC["value"] = bf.photometric_for("verified")   # the descriptors verified asks for
     seeds = [int(s) for s in args.seeds.split(",")]
     gen = bf.first_family if args.family == "first" else bf.second_family
     recordings = list(gen(seeds, Path(args.cache)))

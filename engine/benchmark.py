@@ -1,9 +1,10 @@
 """Methods benchmark on synthetic routes: the harness shared by benchmarks/ and tests/.
 
 A benchmark case is one synthetic recording (route, look, seed, people, lighting,
-noise). Each recording is rendered once, described once per panorama-shift setting
-(cached as .npz when a cache folder is given), and then mapped by every method from
-the same descriptors; each map is scored against the ground-truth poses with
+noise). Each recording is rendered once, described once per panorama-shift setting and
+once more per describe option a method asks for (``engine.params.METHOD_DESCRIBE_OPTIONS``;
+cached as .npz when a cache folder is given), and then mapped by every method from the
+descriptors it asks for; each map is scored against the ground-truth poses with
 ``engine.evaluate`` (the paper's TP/FP/TN/FN plus revisit events).
 """
 
@@ -20,8 +21,8 @@ import numpy as np
 from .descriptors.base import Descriptors
 from .evaluate import evaluate
 from .frames import Frame
-from .params import METHODS, SHIFTED_METHODS, MapParams
-from .pipeline import DescribeSettings, describe_frames
+from .params import METHODS, MapParams
+from .pipeline import DescribeSettings, describe_frames, method_settings
 from .run import run
 from .poses import Poses
 from .synth import make_recording
@@ -57,43 +58,63 @@ class Case:
 @dataclass
 class Described:
     case: Case
-    by_shift: dict            # {True: Descriptors, False: Descriptors}
+    by_shift: dict            # {True: Descriptors, False: Descriptors}, plain (no method's options)
     poses: Poses
-    frames_per_second: dict = field(default_factory=dict)  # extraction speed per shift setting
+    frames_per_second: dict = field(default_factory=dict)  # extraction speed per key of by_shift / by_need
+    by_need: dict = field(default_factory=dict)  # MapParams.describe_needs -> Descriptors with a method's options
+
+    def for_method(self, method: str) -> tuple:
+        """(descriptors, key) ``method`` is mapped on: those described with its describe options
+        (``MapParams.describe_needs``) where ``describe_case`` made them, else the plain ones of
+        its panorama shift."""
+        need = MapParams(method=method).describe_needs
+        key = need if need in self.by_need else need[0]
+        return (self.by_need if key is need else self.by_shift)[key], key
 
 
 def describe_case(case: Case, shifts: Iterable[bool] = (True, False), input_height: int = 128,
-                  descriptor: str = "effnet-vlad", cache_dir: Optional[Path] = None) -> Described:
-    """Render ``case`` and describe it once per shift setting (cached under ``cache_dir``)."""
-    shifts = tuple(shifts)
-    by_shift: dict = {}
+                  descriptor: str = "effnet-vlad", cache_dir: Optional[Path] = None,
+                  methods: Iterable[str] = ()) -> Described:
+    """Render ``case`` and describe it once per shift setting, plainly, and once more for each
+    distinct describe need of ``methods`` that asks for options of its own
+    (``engine.pipeline.method_settings``, e.g. verified's standardised effnet-vlad); cached
+    under ``cache_dir``."""
+    base = DescribeSettings(descriptor=descriptor, interval=1.0 / FPS, options={"input_height": input_height})
+    jobs: dict = {bool(shift): replace(base, shift=bool(shift)) for shift in shifts}
+    for method in methods:
+        settings = method_settings(MapParams(method=method), base)
+        plain = settings.options == base.options
+        jobs.setdefault(settings.shift if plain else MapParams(method=method).describe_needs, settings)
+    described: dict = {}
     fps: dict = {}
     rec = None
-    for shift in shifts:
+    for key, settings in jobs.items():
         path = None
         if cache_dir is not None:
-            path = Path(cache_dir) / f"{case.name}_{descriptor}_h{input_height}_{'shift' if shift else 'noshift'}.npz"
+            extra = "".join(f"_{v}" for k, v in sorted(settings.options.items()) if k != "input_height")
+            path = Path(cache_dir) / (f"{case.name}_{descriptor}_h{input_height}_"
+                                      f"{'shift' if settings.shift else 'noshift'}{extra}.npz")
             if path.is_file():
                 d = Descriptors.load(path)
-                by_shift[shift] = d
-                fps[shift] = float(d.meta.get("bench_fps", 0.0))
+                described[key] = d
+                fps[key] = float(d.meta.get("bench_fps", 0.0))
                 continue
         if rec is None:
             rec = make_recording(case.route, case.look, case.seed, width=case.width, height=case.width // 2,
                                  fps=FPS, people=case.people, lighting_drift=case.lighting_drift,
                                  noise=case.noise)
-        settings = DescribeSettings(descriptor=descriptor, interval=1.0 / FPS, shift=shift,
-                                    options={"input_height": input_height})
         frames = (Frame(k, float(t), rgb) for k, (t, rgb) in enumerate(zip(rec.stamps, rec.frames)))
         t0 = time.perf_counter()
         d = describe_frames(frames, len(rec), settings, source=case.name)
-        fps[shift] = len(rec) / max(time.perf_counter() - t0, 1e-9)
-        d.meta["bench_fps"] = fps[shift]
-        by_shift[shift] = d
+        fps[key] = len(rec) / max(time.perf_counter() - t0, 1e-9)
+        d.meta["bench_fps"] = fps[key]
+        described[key] = d
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             d.save(path)
-    return Described(case, by_shift, case.poses(), fps)
+    by_shift = {k: d for k, d in described.items() if isinstance(k, bool)}
+    by_need = {k: d for k, d in described.items() if not isinstance(k, bool)}
+    return Described(case, by_shift, case.poses(), fps, by_need)
 
 
 @dataclass
@@ -139,11 +160,10 @@ def evaluate_methods(described: Described, methods: Iterable[str] = METHODS,
     for method in methods:
         p = (params or {}).get(method) or MapParams()
         p = replace(p, method=method)
-        shift = method in SHIFTED_METHODS or method not in ("simple",)
-        descs = described.by_shift[shift]
+        descs, key = described.for_method(method)
         topomap = run(descs, p).topomap
         rows.append(score_map(topomap, described.poses, case, method, eval_nn,
-                              float(described.frames_per_second.get(shift, 0.0))))
+                              float(described.frames_per_second.get(key, 0.0))))
     return rows
 
 
@@ -181,7 +201,7 @@ def evaluate_route(route: str, look: str, seed: int = 0, methods: Iterable[str] 
     methods = tuple(methods)
     case = Case(route, look, seed, width=width, **case_options)
     shifts = sorted({m != "simple" for m in methods} | {True}, reverse=True)
-    described = describe_case(case, shifts, input_height=input_height, cache_dir=cache_dir)
+    described = describe_case(case, shifts, input_height=input_height, cache_dir=cache_dir, methods=methods)
     if params == "calibrated":
         params = calibrated_params(described, methods)
     return evaluate_methods(described, methods, params)

@@ -76,6 +76,7 @@ def _cache(args: argparse.Namespace):
 
 
 def _describe_settings(args: argparse.Namespace, shift: bool):
+    """The user's describe settings (``run`` adds what the map's method asks for)."""
     from .pipeline import DescribeSettings
 
     from .validate import describe_options
@@ -94,12 +95,18 @@ def _report_skipped(args: argparse.Namespace, descs) -> None:
               f"(first: {skipped[0]})", file=sys.stderr)
 
 
-def _describe(args: argparse.Namespace, shift: bool):
-    from .pipeline import describe
+def _describe(args: argparse.Namespace):
+    """``describe`` as ``--method`` asks (as ``map`` would describe), unshifted under ``--no-shift``."""
+    from dataclasses import replace
 
+    from .pipeline import describe, method_settings
+
+    settings = method_settings(MapParams(method=args.method), _describe_settings(args, True))
+    if args.no_shift:
+        settings = replace(settings, shift=False)
     bar = _Bar(args.quiet)
     try:
-        descs = describe(args.input, _describe_settings(args, shift), progress=bar, cache=_cache(args))
+        descs = describe(args.input, settings, progress=bar, cache=_cache(args))
     finally:
         bar.close()
     _report_skipped(args, descs)
@@ -163,7 +170,7 @@ def _say(args: argparse.Namespace, text: str) -> None:
 # ----------------------------------------------------------------------------- commands
 
 def cmd_describe(args: argparse.Namespace) -> int:
-    descs = _describe(args, shift=not args.no_shift)
+    descs = _describe(args)
     descs.save(args.output)
     _say(args, f"wrote {args.output}: {len(descs)} descriptors of dimension {descs.vectors.shape[1]}")
     return 0
@@ -235,7 +242,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     from .evaluate import evaluate
-    from .pipeline import DescribeSettings, build_map, describe
+    from .pipeline import DescribeSettings, build_map, describe, method_settings
     from .plots import plot_map
     from .synth import make_recording
 
@@ -250,8 +257,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     bar = _Bar(args.quiet)
     try:
         options = {"input_height": args.input_height} if args.input_height else {}
-        descs = describe(written["video"], DescribeSettings(interval=args.interval, options=options),
-                         progress=bar, cache=None)
+        settings = method_settings(MapParams(), DescribeSettings(interval=args.interval, options=options))
+        descs = describe(written["video"], settings, progress=bar, cache=None)
     finally:
         bar.close()
     topomap = build_map(descs, MapParams(), source=str(written["video"]))
@@ -320,7 +327,8 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     g.add_argument("--photometric", choices=("none", "standardise"),
                    help="effnet-vlad: 'standardise' gives the network each frame with its colour channels at zero "
                    "mean and unit spread, so that exposure and white balance changes between visits count less "
-                   "(default none)")
+                   "(default: what the method asks for, engine/params.py METHOD_DESCRIBE_OPTIONS: standardise "
+                   "for verified, none for the others)")
     p.add_argument("--skip-bad-frames", action="store_true",
                    help="skip frames that cannot be decoded (and say how many) instead of stopping")
     p.add_argument("--no-cache", action="store_true", help="do not read or write the descriptor cache")
@@ -370,7 +378,11 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p = sub.add_parser("describe", parents=[common], help="compute descriptors and save them as .npz")
     p.add_argument("input")
     p.add_argument("-o", "--output", required=True, help="output .npz")
-    p.add_argument("--no-shift", action="store_true", help="do not apply the panorama shift")
+    p.add_argument("--method", default=MapParams().method, choices=METHODS,
+                   help="describe as this loop detection method asks (its panorama shift and describe "
+                        "options; default: %(default)s), so that 'map' of the .npz with that method "
+                        "equals 'map' of the recording")
+    p.add_argument("--no-shift", action="store_true", help="do not apply the panorama shift (whatever --method asks)")
     _add_sampling(p)
     p.set_defaults(func=cmd_describe)
 

@@ -34,6 +34,49 @@ class DescribeSettings:
         return asdict(self)
 
 
+def method_settings(params: MapParams, settings: Optional[DescribeSettings] = None) -> DescribeSettings:
+    """``settings`` as ``params.method`` describes: its panorama shift, and its describe options
+    (``engine.params.METHOD_DESCRIBE_OPTIONS``) for the keys ``settings.descriptor`` has that
+    ``settings.options`` does not already name (an option the user gave wins)."""
+    from .validate import ALLOWED_OPTIONS
+
+    settings = settings or DescribeSettings()
+    allowed = ALLOWED_OPTIONS.get(settings.descriptor, {})
+    filled = {k: v for k, v in params.describe_options.items() if k in allowed and k not in settings.options}
+    return replace(settings, shift=params.uses_shift, options={**settings.options, **filled})
+
+
+def descriptors_fit(descs: Descriptors, settings: DescribeSettings) -> bool:
+    """Whether ``descs`` were described as ``settings`` (from ``method_settings``) asks in what a
+    method decides: the panorama shift (meta "shift") and the options any method may fill in
+    (meta "settings", the model's own record, which leaves out an option at its default).
+    Descriptors of another descriptor than ``settings.descriptor`` are judged by the shift only."""
+    from .params import METHOD_DESCRIBE_OPTIONS
+
+    if bool(descs.meta.get("shift", True)) != bool(settings.shift):
+        return False
+    name = descs.meta.get("descriptor")
+    if name != settings.descriptor or name not in descriptor_registry.REGISTRY:
+        return True
+    described = descs.meta.get("settings") or {}
+    keys = {k for options in METHOD_DESCRIBE_OPTIONS.values() for k in options}
+    return all(_option_value(name, k, described.get(k)) == _option_value(name, k, settings.options.get(k))
+               for k in keys)
+
+
+def _option_value(descriptor: str, key: str, value):
+    """``value`` of option ``key``, or the descriptor's own default when None."""
+    if value is not None:
+        return value
+    import inspect
+
+    try:
+        parameter = inspect.signature(descriptor_registry.model_class(descriptor)).parameters.get(key)
+    except InputError:
+        return None
+    return None if parameter is None or parameter.default is inspect.Parameter.empty else parameter.default
+
+
 def is_descriptor_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() == ".npz"
 

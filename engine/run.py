@@ -3,8 +3,9 @@
 The command line (``panotopo map``), the desktop app's worker and the benchmarks all call
 ``run``; each stage is one call of its own module, in this order:
 
-1. describe   ``engine.pipeline.describe`` (a recording or a descriptors .npz), skipped when
-              ``Descriptors`` are given (the benchmarks describe frames held in memory);
+1. describe   ``engine.pipeline.describe`` (a recording or a descriptors .npz) as the method
+              asks (``engine.pipeline.method_settings``: panorama shift, describe options),
+              skipped when ``Descriptors`` are given (the benchmarks describe frames held in memory);
 2. thresholds the paper's thresholds calibrated from the recording, for those not set
               (``auto_thresholds``; ``engine.calibrate.paper_thresholds``);
 3. map        ``engine.pipeline.build_map``: nodes and loops;
@@ -37,18 +38,19 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
         poses: Optional[Poses] = None, recording_poses: bool = False, auto_thresholds: bool = False,
         evaluate: bool = False, eval_nn: Optional[int] = None, progress=None, cancel=None,
         cache=None, poses_name: str = "poses") -> RunResult:
-    """Stages 1-5 (module notes). ``settings`` is an ``engine.pipeline.DescribeSettings``
-    (its ``shift`` follows the method); ``recording_poses`` looks for positions in the
+    """Stages 1-5 (module notes). ``settings`` is an ``engine.pipeline.DescribeSettings``, the
+    user's: its ``shift`` and the describe options the method asks for follow the method
+    (``engine.pipeline.method_settings``); ``recording_poses`` looks for positions in the
     recording itself when ``poses`` is None; ``eval_nn`` overrides the map's temporal
     window for evaluation; ``poses_name`` names the poses in an error."""
-    from .pipeline import DescribeSettings, build_map, describe, is_descriptor_file
+    from .pipeline import build_map, describe, is_descriptor_file, method_settings
     from .progress import check
 
     warnings: list[str] = []
     if isinstance(source, Descriptors):                                            # 1
         descs, name = source, str(source.meta.get("source", ""))
     else:
-        settings = replace(settings or DescribeSettings(), shift=params.uses_shift)
+        settings = method_settings(params, settings)
         descs = describe(source, settings, progress=progress, cancel=cancel, cache=cache)
         name = "" if is_descriptor_file(source) else str(source)
     if auto_thresholds:                                                            # 2

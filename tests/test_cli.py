@@ -83,7 +83,7 @@ def g_methods():
 def test_describe_then_map_from_npz_gives_the_same_map(recording, tmp_path, cache_dir, capsys):
     _, files = recording
     npz = tmp_path / "d.npz"
-    code, _, err = run_cli(capsys, "describe", files["video"], "-o", npz, *FAST, *cache_dir)
+    code, _, err = run_cli(capsys, "describe", files["video"], "-o", npz, "--method", "ours", *FAST, *cache_dir)
     assert code == 0, err
     with np.load(npz) as z:
         assert z["stamps"].dtype == np.float64 and z["frames"].dtype == np.int64
@@ -105,15 +105,75 @@ def test_photometric_option_reaches_the_descriptor_and_its_cache_key(recording, 
     # The option is a descriptor setting: it is written into the file's meta, and a cached
     # description made without it is not reused for it (the cache key covers every setting).
     _, files = recording
+    # (--method ours: a method that asks for no photometric option of its own.)
     plain, standardised = tmp_path / "plain.npz", tmp_path / "std.npz"
-    assert run_cli(capsys, "describe", files["video"], "-o", plain, *FAST, *cache_dir)[0] == 0
-    code, _, err = run_cli(capsys, "describe", files["video"], "-o", standardised, "--photometric", "standardise",
-                           *FAST, *cache_dir)
+    assert run_cli(capsys, "describe", files["video"], "-o", plain, "--method", "ours", *FAST, *cache_dir)[0] == 0
+    code, _, err = run_cli(capsys, "describe", files["video"], "-o", standardised, "--method", "ours",
+                           "--photometric", "standardise", *FAST, *cache_dir)
     assert code == 0, err
     with np.load(plain) as a, np.load(standardised) as b:
         settings = [json.loads(str(z["meta"]))["settings"] for z in (a, b)]
         assert "photometric" not in settings[0] and settings[1]["photometric"] == "standardise"
         assert not np.allclose(a["descriptors"], b["descriptors"])
+
+
+def _cached(cache: Path) -> list:
+    """Descriptors in a descriptor cache folder (one .npz per key)."""
+    from engine.descriptors.base import Descriptors
+
+    return [Descriptors.load(p) for p in sorted(cache.rglob("*.npz"))]
+
+
+def _photometric(descs) -> str:
+    return descs.meta["settings"].get("photometric", "none")
+
+
+@pytest.mark.parametrize("argv, expected", [
+    ([], "standardise"),                                                    # verified, the default
+    (["--method", "ours"], "none"),                                         # the paper's: plain
+    (["--method", "verified", "--photometric", "none"], "none"),           # the user's choice wins
+    (["--method", "ours", "--photometric", "standardise"], "standardise"),
+])
+def test_map_describes_as_its_method_asks(recording, tmp_path, capsys, argv, expected):
+    _, files = recording
+    cache = tmp_path / "cache"
+    code, _, err = run_cli(capsys, "map", files["video"], "-o", tmp_path / "m.graphml", *argv, *FAST,
+                           "--cache-dir", cache)
+    assert code == 0, err
+    (descs,) = _cached(cache)
+    assert descs.meta["descriptor"] == "effnet-vlad" and descs.meta["shift"] is True
+    assert _photometric(descs) == expected
+
+
+def test_describe_then_map_uses_the_descriptors_map_alone_would(recording, tmp_path, cache_dir, capsys):
+    # describe follows the default method as map does: map of the recording then finds describe's
+    # descriptors in the cache (same settings, same key) instead of describing anew.
+    _, files = recording
+    cache = Path(cache_dir[1])
+    npz, plain = tmp_path / "d.npz", tmp_path / "plain.npz"
+    assert run_cli(capsys, "describe", files["video"], "-o", npz, *FAST, *cache_dir)[0] == 0
+    assert run_cli(capsys, "map", files["video"], "-o", tmp_path / "m.graphml", *FAST, *cache_dir)[0] == 0
+    (cached,) = _cached(cache)
+    with np.load(npz) as z:
+        meta = json.loads(str(z["meta"]))
+    assert meta["settings"] == cached.meta["settings"] and meta["shift"] == cached.meta["shift"]
+    assert _photometric(cached) == "standardise"
+    a, b = tmp_path / "a.graphml", tmp_path / "b.graphml"
+    assert run_cli(capsys, "map", npz, "-o", a, "-q")[0] == 0
+    assert run_cli(capsys, "map", files["video"], "-o", b, *FAST, *cache_dir)[0] == 0
+    ga, gb = nx.read_graphml(a), nx.read_graphml(b)
+    assert sorted(ga.nodes) == sorted(gb.nodes) and sorted(map(sorted, ga.edges)) == sorted(map(sorted, gb.edges))
+    # describe --method ours describes plainly; --no-shift still wins over the method's shift.
+    assert run_cli(capsys, "describe", files["video"], "-o", plain, "--method", "ours", *FAST, *cache_dir)[0] == 0
+    with np.load(plain) as z:
+        meta = json.loads(str(z["meta"]))
+    assert "photometric" not in meta["settings"] and meta["shift"] is True
+    unshifted = tmp_path / "unshifted.npz"
+    assert run_cli(capsys, "describe", files["video"], "-o", unshifted, "--no-shift", *FAST, *cache_dir)[0] == 0
+    with np.load(unshifted) as z:
+        meta = json.loads(str(z["meta"]))
+        assert meta["shift"] is False and not z["shifts"].any()
+    assert meta["settings"]["photometric"] == "standardise"
 
 
 def test_auto_thresholds_calibrate_what_the_user_left_unset(recording, tmp_path, cache_dir, capsys):
