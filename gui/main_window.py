@@ -721,6 +721,9 @@ class MainWindow(QMainWindow):
         if needs_remap(result.job.params, self.doc.params):
             # The user changed a map parameter while the run was going: honour it (off the UI thread).
             self._remap(self.doc.params)
+        elif result.job.params != self.doc.params:
+            # ... or the method, to one that needs other descriptors: describe again, or map a .npz.
+            self._apply_params(result.job.params, self.doc.params)
         self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
         self.params_panel.set_params(self.doc.params, self._used_defaults())
         self._restore_view()
@@ -786,18 +789,25 @@ class MainWindow(QMainWindow):
 
     def _apply_params(self, _old: MapParams, new: MapParams) -> None:
         """Rebuild the map with ``new`` (undo/redo and the panel both land here)."""
+        from engine.pipeline import DescribeSettings, descriptors_fit, method_settings
+
         self.doc.params = new
         self.params_panel.set_params(new, self._defaults)
         descs = self.doc.descs
         if descs is None or self._preparing_run is not None:
             return  # the run's map is on its way; it is rebuilt with ``new`` when it lands
-        if new.uses_shift != bool(descs.meta.get("shift", True)):
-            if str(self.doc.input_path).endswith(".npz"):
+        # What the descriptors were described with (their meta) against what ``new`` asks for
+        # on top of the user's own describe settings (panorama shift, a method's describe options).
+        wanted = method_settings(new, self.doc.describe_settings or DescribeSettings())
+        if not descriptors_fit(descs, wanted):
+            if not str(self.doc.input_path).endswith(".npz"):
+                self.start_run()  # describe again (cached when done before)
+                return
+            if new.uses_shift != bool(descs.meta.get("shift", True)):
                 self.warn(f"Method '{new.method}' needs {'shifted' if new.uses_shift else 'unshifted'} "
                           "descriptors, which this descriptors file does not have")
                 return
-            self.start_run()  # describe again (cached when done before)
-            return
+            # Only a describe option differs: a descriptors file is what it is; map it.
         self._remap(new)
 
     def _remap(self, params: MapParams) -> None:

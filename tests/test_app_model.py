@@ -169,6 +169,16 @@ def test_decisions_carry_over_a_rebuilt_map_and_a_changed_parameter():
     assert not needs_remap(MapParams(), MapParams())
 
 
+def test_no_remap_across_methods_that_need_other_descriptors():
+    """A method change is a remap only where both methods describe alike (shift and describe
+    options): verified's standardised descriptors are no input for ours, nor simple's unshifted."""
+    assert needs_remap(MapParams(method="ours"), MapParams(method="shift-simple"))
+    assert not needs_remap(MapParams(method="verified"), MapParams(method="ours"))
+    assert not needs_remap(MapParams(method="ours"), MapParams(method="verified"))
+    assert not needs_remap(MapParams(method="ours"), MapParams(method="simple"))
+    assert needs_remap(MapParams(method="verified"), MapParams(method="verified", auto_z=4.0))
+
+
 def test_every_decision_is_one_record_and_replay_restores_the_work():
     loops = [dict(a=0, b=100, status="candidate"), dict(a=1, b=200, status="candidate"),
              dict(a=2, b=300, status="candidate")]

@@ -274,6 +274,47 @@ def test_switching_to_simple_describes_again_and_keeps_decisions(qtbot, make_win
     assert key in statuses(w) or w.doc.topomap.unapplied["loops"]
 
 
+def _photometric(descs) -> str:
+    return descs.meta["settings"].get("photometric", "none")
+
+
+def test_the_method_decides_the_describe_options_in_the_app(qtbot, make_window, recording, tmp_path, dialogs):
+    """verified's descriptors are standardised: switching to ours describes again, plainly (not
+    a bare remap), and back; a verified parameter only remaps. A descriptors file is what it
+    is: either method maps it, only a method needing another shift is refused."""
+    w = make_window()
+    panel = w.params_panel
+    runs: list = []
+    w.runner.started.connect(lambda: runs.append(panel.method.currentData()))
+    panel.method.setCurrentIndex(panel.method.findData("verified"))
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    assert _photometric(w.doc.descs) == "standardise"
+    assert "photometric" not in w.doc.describe_settings.options      # the user's own settings stay plain
+    for method, expected in (("ours", "none"), ("verified", "standardise")):
+        with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+            panel.method.setCurrentIndex(panel.method.findData(method))
+            assert w.runner.running                                   # describing again, not remapping
+        assert _photometric(w.doc.descs) == expected and w.doc.topomap.meta["method"] == method
+    assert runs == ["verified", "ours", "verified"]
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):
+        panel.neighbor_node_num.setValue(panel.neighbor_node_num.value() + 1)
+        assert not w.runner.running                                   # same descriptors: a remap
+    assert len(runs) == 3 and w.doc.topomap.meta["neighbor_node_num"] == panel.neighbor_node_num.value()
+
+    npz = tmp_path / "standardised.npz"
+    w.doc.descs.save(npz)
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        assert w.open_path(str(npz))
+    with qtbot.waitSignal(w.mapReady, timeout=30_000):
+        panel.method.setCurrentIndex(panel.method.findData("ours"))
+        assert not w.runner.running                                   # mapped as it is
+    assert w.doc.topomap.meta["method"] == "ours" and _photometric(w.doc.descs) == "standardise"
+    assert not [text for kind, text in dialogs if kind == "warning"]
+    panel.method.setCurrentIndex(panel.method.findData("simple"))     # unshifted: the file cannot serve
+    assert [text for kind, text in dialogs if kind == "warning" and "unshifted" in text]
+    assert not w.runner.running and w.doc.topomap.meta["method"] == "ours"
+
+
 def test_cancelled_run_leaves_map_and_decisions_untouched(qtbot, make_window, recording, tmp_path):
     w = make_window()
     open_and_run(qtbot, w, copy_recording(recording, tmp_path))

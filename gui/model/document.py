@@ -156,7 +156,9 @@ class MapDocument:
     def __init__(self) -> None:
         self.input_path: Optional[Path] = None
         self.source = None                      # engine.frames.FrameSource for the viewer
-        self.describe_settings = None           # engine.pipeline.DescribeSettings
+        # engine.pipeline.DescribeSettings as the user chose them: the run adds the method's
+        # describe options (engine.pipeline.method_settings), so another method gets its own.
+        self.describe_settings = None
         self.params = MapParams()
         self.descs = None                       # engine.descriptors.base.Descriptors
         self.topomap = None                     # engine.graph.TopoMap
@@ -523,7 +525,8 @@ def _number(value) -> Optional[float]:
 def needs_remap(built_with: MapParams, wanted: MapParams) -> bool:
     """A run finished with parameters the user has changed meanwhile: build the map again?
 
-    Only the map step needs repeating when the descriptors still fit (same shift
-    setting); a change of shift setting starts a new describe run instead.
+    Only the map step needs repeating when the descriptors still fit (the same describe
+    needs: panorama shift and the method's describe options, ``MapParams.describe_needs``);
+    a method that needs other descriptors starts a new describe run instead.
     """
-    return built_with != wanted and built_with.uses_shift == wanted.uses_shift
+    return built_with != wanted and built_with.describe_needs == wanted.describe_needs
