@@ -28,8 +28,9 @@ four pairs of one walk: a direction, not a calibration). It costs n network pass
 the default because every calibrated number and benchmark recording was made with it.
 Photometric (``photometric``, default "none"): "standardise" gives the network each frame with
 its channels at zero mean and unit spread (``accel.standardise``), so that another exposure or
-white balance at the same place changes nothing; "none" stays the default for now for the same
-reason as ``phases`` (fifteenth round: benchmarks/results/photometric.md).
+white balance at the same place changes nothing. The model's default stays "none" (the paper's
+methods' thresholds were calibrated without it); the ``verified`` method asks for "standardise"
+(``engine.params.METHOD_DESCRIBE_OPTIONS``; benchmarks/results/photometric.md).
 torch is imported lazily so that the registry and ``defaults`` stay cheap.
 """
 
