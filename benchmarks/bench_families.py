@@ -235,6 +235,22 @@ def table(rows: list[Row], methods) -> str:
 
 # Bins of how close the two visits of a revisit came (metres, closest same-place pair).
 CLOSEST_BINS = (0.0, 0.25, 0.5, 0.75, 1.0)
+# Bins of how long the robot was away (nodes along the path between the two visits; pairs
+# within ``EVAL_NN`` nodes are temporal neighbours, never revisits): a tight turn that passes
+# near its own track a few nodes on, a short loop, a long one.
+SPAN_BINS = (EVAL_NN + 1, 11, 51, 10**9)
+
+
+def _found_by(rows: list[Row], method: str, values: np.ndarray, bins, names) -> str:
+    found = np.array([f for r in rows if r.method == method for f in r.event_found], bool)
+    cells = []
+    for k, (lo, hi) in enumerate(zip(bins, bins[1:])):
+        last = k == len(bins) - 2
+        sel = (values >= lo) & ((values <= hi) if last else (values < hi))
+        cells.append(f" {int(found[sel].sum())}/{int(sel.sum())} |")
+    fam = rows[0].family if rows else ""
+    head = "| family | method |" + "".join(f" {n} |" for n in names)
+    return head + "\n|---|---|" + "---|" * len(cells) + f"\n| {fam} | {method} |" + "".join(cells)
 
 
 def by_closest(rows: list[Row], method: str) -> str:
@@ -242,14 +258,15 @@ def by_closest(rows: list[Row], method: str) -> str:
     from where the robot was and one passed 0.95 m away are both revisits under the 1 m
     truth, but only geometry at its finest tells the second from a neighbour 1.1 m away."""
     closest = np.array([d for r in rows if r.method == method for d in r.event_closest])
-    found = np.array([f for r in rows if r.method == method for f in r.event_found], bool)
-    head = ["| family | method |"] + [f" {lo:g}-{hi:g} m |" for lo, hi in zip(CLOSEST_BINS, CLOSEST_BINS[1:])]
-    cells = []
-    for lo, hi in zip(CLOSEST_BINS, CLOSEST_BINS[1:]):
-        sel = (closest >= lo) & ((closest < hi) if hi < CLOSEST_BINS[-1] else (closest <= hi))
-        cells.append(f" {int(found[sel].sum())}/{int(sel.sum())} |")
-    fam = rows[0].family if rows else ""
-    return "".join(head) + "\n|---|---|" + "---|" * len(cells) + f"\n| {fam} | {method} |" + "".join(cells)
+    names = [f"{lo:g}-{hi:g} m" for lo, hi in zip(CLOSEST_BINS, CLOSEST_BINS[1:])]
+    return _found_by(rows, method, closest, CLOSEST_BINS, names)
+
+
+def by_span(rows: list[Row], method: str) -> str:
+    """Events found automatically, by how many nodes the robot was away (``SPAN_BINS``)."""
+    span = np.array([d for r in rows if r.method == method for d in r.event_span])
+    names = [f"{lo}-{hi - 1} nodes" for lo, hi in zip(SPAN_BINS[:-2], SPAN_BINS[1:-1])] + [f"{SPAN_BINS[-2]}+ nodes"]
+    return _found_by(rows, method, span, SPAN_BINS, names)
 
 
 def photometric_for(method: str, forced=None) -> str:
@@ -295,7 +312,9 @@ def main() -> None:
     text += table(rows, methods)
     if args.family != "real":
         text += ("\n\nRevisits found automatically, by how close the two visits came (closest same-place pair):\n\n"
-                 + "\n\n".join(by_closest(rows, m) for m in methods))
+                 + "\n\n".join(by_closest(rows, m) for m in methods)
+                 + "\n\nRevisits found automatically, by how many nodes the robot was away between the two visits:\n\n"
+                 + "\n\n".join(by_span(rows, m) for m in methods))
     print(text)
     if args.out:
         RESULTS.mkdir(exist_ok=True)

@@ -142,6 +142,7 @@ class Row:
     events_with_candidates: int = 0  # revisit events found by an auto loop or a candidate
     event_closest: tuple = ()        # per event: closest same-place pair, metres
     event_found: tuple = ()          # per event: found by an automatic loop
+    event_span: tuple = ()           # per event: the most nodes between its two visits
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -176,7 +177,7 @@ def score_map(topomap, poses: Poses, case, method: str, eval_nn: int = 5, fps: f
                ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
                ev.events_total, fps, getattr(case, "people", 0), getattr(case, "family", "synth"),
                cands, with_cand.fp - ev.fp, with_cand.events_found,
-               tuple(ev.event_closest), tuple(ev.event_found))
+               tuple(ev.event_closest), tuple(ev.event_found), tuple(ev.event_span))
 
 
 PAPER_METHODS = ("simple", "shift-simple", "ours")

@@ -80,6 +80,9 @@ class Evaluation:
     # and whether it was found; a benchmark reads how recall depends on that distance.
     event_closest: list[float] = field(default_factory=list)
     event_found: list[bool] = field(default_factory=list)
+    # ... and how long the robot was away: the most nodes along the path between the two
+    # nodes of one of its same-place pairs (a tight turn comes back within a few nodes).
+    event_span: list[int] = field(default_factory=list)
 
     def undefined(self) -> tuple[str, ...]:
         """The ratios with a zero denominator (no detections: precision; no positives: recall).
@@ -215,6 +218,8 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
     np.minimum.at(event_closest, event_of_pair, np.hypot(x[pi] - x[pj], y[pi] - y[pj]))
     event_found = np.zeros(event_ids.size, bool)
     event_found[event_of_pair[~missed]] = True
+    event_span = np.zeros(event_ids.size, np.int64)
+    np.maximum.at(event_span, event_of_pair, (pj - pi).astype(np.int64))
     found, events_total = int(event_found.sum()), int(event_ids.size)
 
     return Evaluation(
@@ -225,4 +230,5 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         events_found=found, events_total=events_total,
         loop_truth=loop_truth, dist_th=float(dist_th), neighbor_node_num=nn,
         event_closest=event_closest.tolist(), event_found=event_found.tolist(),
+        event_span=event_span.tolist(),
     )

@@ -76,6 +76,10 @@ def test_hand_counted_map():
     # Events: (2,6) (1,7) (0,8) (0,9) touch diagonally (the drive back), one event,
     # found through its TPs; (4,12) is a second event, its loop was rejected: missed.
     assert (ev.events_found, ev.events_total) == (1, 2)
+    # Per event, hand-counted: closest pair (1,7) 0.3 m and (4,12) 0.22 m; the most nodes
+    # between two visits: (0,9) 9 nodes for the drive back, (4,12) 8.
+    assert ev.event_closest == pytest.approx([0.3, np.hypot(0.2, 0.1)])
+    assert ev.event_span == [9, 8] and ev.event_found == [True, False]
     assert ev.event_coverage == pytest.approx(0.5)
     assert ev.loop_truth == {("n0", "n8"): "TP", ("n1", "n10"): "FP", ("n2", "n6"): "TP",
                              ("n3", "n5"): "FP", ("n4", "n12"): "FN", ("n6", "n11"): "TN"}
