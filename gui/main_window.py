@@ -43,7 +43,7 @@ from .node_panel import NodePanel
 from .pair_evidence import pair_yaw
 from .pair_view import PairView
 from .window_layout import split_views
-from .params_panel import ParamsPanel
+from .params_panel import ParamsPanel, photometric_applies
 from .similarity_view import SimilarityView
 from .worker import FinishedRun, RunController, RunJob
 
@@ -408,9 +408,11 @@ class MainWindow(QMainWindow):
                 settings = _describe_settings(session.describe, self.describe_options)
             else:
                 params = session.map_params() if session else self.params_panel.params()
-                settings = DescribeSettings(descriptor=self.params_panel.descriptor_name(),
+                descriptor = self.params_panel.descriptor_name()
+                settings = DescribeSettings(descriptor=descriptor,
                                             interval=self.params_panel.interval_value(), topic=topic,
-                                            shift=params.uses_shift, options=dict(self.describe_options))
+                                            shift=params.uses_shift,
+                                            options=self._panel_options(self.describe_options, descriptor))
 
         if not self._attach_journal(p):
             return False
@@ -645,10 +647,20 @@ class MainWindow(QMainWindow):
         interval = self.params_panel.interval_value()
         if self.doc.descs is not None and str(self.doc.input_path).endswith(".npz"):
             descriptor, interval = old.descriptor, old.interval  # a descriptors file is what it is
-        options = dict(old.options) if descriptor == old.descriptor else dict(self.describe_options)
+        options = self._panel_options(old.options if descriptor == old.descriptor else self.describe_options,
+                                      descriptor)
         settings = DescribeSettings(descriptor=descriptor, interval=interval, topic=old.topic,
                                     shift=self.doc.params.uses_shift, options=options)
         self._start(settings)
+
+    def _panel_options(self, options: dict, descriptor: str) -> dict:
+        """The user's describe ``options`` with the panel's photometric choice: named when
+        chosen, left to the method (``engine.pipeline.method_settings``) when not."""
+        out = {k: v for k, v in options.items() if k != "photometric"}
+        choice = self.params_panel.photometric_choice()
+        if choice is not None and photometric_applies(descriptor):
+            out["photometric"] = choice
+        return out
 
     def _start(self, settings) -> None:
         from engine.descriptors.cache import DescriptorCache
@@ -725,6 +737,7 @@ class MainWindow(QMainWindow):
             # ... or the method, to one that needs other descriptors: describe again, or map a .npz.
             self._apply_params(result.job.params, self.doc.params)
         self.params_panel.set_describe(result.job.settings.descriptor, result.job.settings.interval)
+        self.params_panel.set_photometric(result.job.settings.options.get("photometric"))
         self.params_panel.set_params(self.doc.params, self._used_defaults())
         self._restore_view()
         self.statusBar().showMessage(

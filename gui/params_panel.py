@@ -21,7 +21,20 @@ from PySide6.QtWidgets import (QAbstractSpinBox, QApplication, QCheckBox, QCombo
                                QWidget)
 
 from engine import params as params_module
+from engine.descriptors.efficientnet import PHOTOMETRIC
 from engine.params import MapParams, Parameter
+
+# The photometric choices the panel offers: None leaves it to the method.
+PHOTOMETRIC_ITEMS = (("As the method asks", None),) + tuple((v.capitalize(), v) for v in PHOTOMETRIC)
+
+
+
+def photometric_applies(descriptor: str) -> bool:
+    """Whether ``descriptor`` has the ``photometric`` option (engine.validate's options table)."""
+    from engine.validate import ALLOWED_OPTIONS
+
+    return "photometric" in ALLOWED_OPTIONS.get(descriptor, {})
+
 
 METHOD_TIPS = {
     "simple": "Simple threshold on unshifted descriptors (paper baseline)",
@@ -56,11 +69,22 @@ class ParamsPanel(QWidget):
         self.interval.setValue(1.0)
         self.interval.setSuffix(" s")
         self.interval.setToolTip("Sampling interval of the recording (the paper: 1.0 s)")
+        # effnet-vlad's photometric option: by default what the method asks for
+        # (engine.params.METHOD_DESCRIBE_OPTIONS: verified standardises, the paper's methods do not).
+        self.photometric = QComboBox()
+        for text, value in PHOTOMETRIC_ITEMS:
+            self.photometric.addItem(text, value)
+        self.photometric.setToolTip("effnet-vlad: give the network each frame with its colour channels at zero mean "
+                                    "and unit spread, so that exposure and white balance changes between visits "
+                                    "count less. 'As the method asks': verified does, the paper's methods do not "
+                                    "(their thresholds were calibrated without it). Applied by Run.")
         self.run_button = QPushButton("Run")
         self.run_button.setToolTip("Describe the recording with these settings and build the map (F5)")
         self.run_button.clicked.connect(self.runRequested)
         self.descriptor.currentIndexChanged.connect(lambda _: self._describe_changed())
         self.interval.valueChanged.connect(lambda _: self._describe_changed())
+        self.photometric.currentIndexChanged.connect(lambda _: self._describe_changed())
+        self.descriptor.currentIndexChanged.connect(lambda _: self._enable_photometric())
 
         self.method = QComboBox()
         for m in params_module.METHODS:  # read at run time: methods may be added
@@ -90,6 +114,8 @@ class ParamsPanel(QWidget):
         form = QFormLayout(describe_box)
         form.addRow("Descriptor", self.descriptor)
         form.addRow("Interval", self.interval)
+        form.addRow("Photometric", self.photometric)
+        self._describe_form = form
         row = QHBoxLayout()
         row.addStretch(1)
         row.addWidget(self.run_button)
@@ -130,6 +156,7 @@ class ParamsPanel(QWidget):
             w.setFocusPolicy(Qt.StrongFocus)   # a wheel does not focus it...
             w.installEventFilter(self)         # ...and scrolls the panel (eventFilter)
         self.set_params(MapParams(), {"node_sim_th": 0.8, "loop_sim_th": 0.55})
+        self._enable_photometric()
 
     def _build_evidence(self) -> None:
         """A generated row for each table parameter without a hand-made widget (``verified``'s
@@ -210,6 +237,22 @@ class ParamsPanel(QWidget):
 
     def descriptor_name(self) -> str:
         return self.descriptor.currentText()
+
+    def photometric_choice(self) -> Optional[str]:
+        """effnet-vlad's ``photometric`` as chosen here; None: what the method asks for."""
+        return self.photometric.currentData()
+
+    def set_photometric(self, value: Optional[str]) -> None:
+        """Show ``value`` (None: "as the method asks") without emitting."""
+        self._updating = True
+        try:
+            self.photometric.setCurrentIndex(max(self.photometric.findData(value), 0))
+        finally:
+            self._updating = False
+
+    def _enable_photometric(self) -> None:
+        """The row only where the descriptor has the option (effnet-vlad)."""
+        self._describe_form.setRowVisible(self.photometric, photometric_applies(self.descriptor_name()))
 
     def interval_value(self) -> float:
         return float(self.interval.value())

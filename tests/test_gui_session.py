@@ -681,3 +681,26 @@ def test_failed_run_keeps_map_and_decisions(qtbot, make_window, recording, tmp_p
     assert w.doc.topomap is topomap and w.doc.decisions() == decisions
     assert [k for k, _ in dialogs] == ["critical"] and "Traceback" not in dialogs[0][1]
     assert not w.runner.running and w.isWindowModified()
+
+
+def test_the_panel_photometric_choice_wins_over_the_method_and_is_saved(qtbot, make_window, recording, tmp_path):
+    """The Descriptors group's Photometric row: a named choice is the user's (kept in the
+    session, used whatever the method); "as the method asks" leaves it to the method again.
+    The row is there only for a descriptor that has the option."""
+    w = make_window()
+    panel = w.params_panel
+    panel.method.setCurrentIndex(panel.method.findData("verified"))
+    assert panel.photometric.isVisibleTo(panel) and panel.photometric_choice() is None
+    panel.photometric.setCurrentIndex(panel.photometric.findData("none"))
+    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    assert _photometric(w.doc.descs) == "none"                       # not what verified asks
+    assert w.current_session().describe["options"]["photometric"] == "none"
+    assert panel.photometric_choice() == "none"
+    panel.set_photometric(None)
+    assert panel.photometric_choice() is None
+    with qtbot.waitSignal(w.mapReady, timeout=RUN_TIMEOUT):
+        w.start_run()
+    assert _photometric(w.doc.descs) == "standardise"
+    assert "photometric" not in w.current_session().describe["options"]
+    panel.descriptor.setCurrentIndex(panel.descriptor.findText("anyloc-gem"))
+    assert not panel.photometric.isVisibleTo(panel)
