@@ -68,8 +68,9 @@ class Described:
         (``MapParams.describe_needs``) where ``describe_case`` made them, else the plain ones of
         its panorama shift."""
         need = MapParams(method=method).describe_needs
-        key = need if need in self.by_need else need[0]
-        return (self.by_need if key is need else self.by_shift)[key], key
+        if need in self.by_need:
+            return self.by_need[need], need
+        return self.by_shift[need[0]], need[0]
 
 
 def describe_case(case: Case, shifts: Iterable[bool] = (True, False), input_height: int = 128,
