@@ -148,15 +148,17 @@ PARAMETERS: tuple[Parameter, ...] = (
               "queue, a candidate is dropped)",
               "chosen on the first synthetic family (seeds 0-4): the two visits of a place "
               "on a short return miss by 2 steps at most", 0.0, 1e6),
-    Parameter("closure_rate", float, 0.6, _NEW,
+    Parameter("closure_rate", float, 0.2, _NEW,
               "share of the path length between a loop's ends that dead reckoning "
               "may miss meeting (heading and step-length drift)",
-              "chosen on the first synthetic family (seeds 0-4): true loops then "
-              "missed by up to 0.53 of the path (one wrong turn indoors); a corridor repeating 9 "
-              "steps later misses by all 9. Fifteenth round, re-measured with today's reckoning: "
-              "at most 0.37 (a 6-step loop), 0.21 on loops of 78 steps or more; 0.4 tried and not "
-              "taken (the same places on the first family, one place fewer on the second family's "
-              "seeds 55-66, no false loop fewer: benchmarks/results/closure_rate_fifteenth.md)", 0.0, 10.0),
+              "chosen on the first synthetic family (seeds 0-4), the least round number above "
+              "the worst true automatic loop. Seventeenth round, with the direction of each "
+              "step's motion chosen by points with parallax (engine.sphere._decompose): at most "
+              "0.185 (a reverse drive indoors whose curve was read 31 degrees short through a "
+              "step without a model), 0.08 elsewhere: 0.2. Earlier 0.6 (0.53, one wrong turn "
+              "indoors), and 0.37 re-measured in the fifteenth round (steps read backwards "
+              "outdoors; 0.4 then not taken: benchmarks/results/closure_rate_fifteenth.md, "
+              "benchmarks/results/closure_rate_seventeenth.md)", 0.0, 10.0),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 
@@ -187,7 +189,7 @@ class MapParams:
     place_radius: int = 4
     heading_tol: float = 35.0
     closure_slack: float = 2.0
-    closure_rate: float = 0.6
+    closure_rate: float = 0.2
 
     def resolved(self, defaults: dict) -> "MapParams":
         """Fill every None from a descriptor's ``defaults``."""

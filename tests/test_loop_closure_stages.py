@@ -198,8 +198,9 @@ def test_a_node_joined_to_two_places_apart_on_the_other_pass_sends_both_loops_to
     # Three true loops along the return, and node 14 joined once more, to node 176: ten steps
     # away from node 186 on the same pass, so 14 cannot be both places. Which is wrong the path
     # cannot say, and confidence is no judge: the wrong loop is once less, once more confident.
+    # The other true loops lie far enough along the path for its drift to explain ten steps.
     for conf_true, conf_wrong in ((8, 5), (8, 12)):
-        c = matches(a=[10, 14, 18, 14], b=[190, 186, 182, 176], score=[8, conf_true, 8, conf_wrong],
+        c = matches(a=[40, 14, 60, 14], b=[160, 186, 140, 176], score=[8, conf_true, 8, conf_wrong],
                     confidence=[8, conf_true, 8, conf_wrong])
         status = np.array(["auto"] * 4, dtype=object)
         assert lengths(c, status, track, P).tolist() == ["auto", "candidate", "auto", "candidate"]
