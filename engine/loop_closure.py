@@ -664,10 +664,10 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     turned by i's heading); where the pair has no essential model the direction of the
     step before is kept (a robot keeps moving the way it moved); so too at the ``overruled``
     steps (stage 8a: their model was the wrong one). On the first synthetic
-    family (seeds 0-4) the path between the two visits of a place missed meeting by at
-    most 0.53 of its length when they were chosen (one wrong turn indoors; 0.37 with this
-    reckoning, re-measured in the fifteenth round) and 2 steps on short returns: the numbers
-    of ``closure_rate`` and ``closure_slack``."""
+    family (seeds 0-4) the path between the two visits of a place misses meeting by at
+    most 2 steps on short returns and 0.185 of its length beyond that (a curve indoors read
+    31 degrees short; 0.08 elsewhere, since the seventeenth round's sign of the motion,
+    ``engine.sphere._decompose``): the numbers of ``closure_slack`` and ``closure_rate``."""
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
@@ -703,9 +703,12 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     street): appearance and geometry cannot tell an exact copy from a revisit, the path can.
     An automatic loop there goes back to "candidate" (strong evidence against the path: a
     person decides); a candidate there is dropped (weak evidence and the path against it:
-    nothing to review). On the first synthetic family (seeds 0-4) no candidate within 1 m
-    of its place missed by more than 0.83 of the tolerance, and 116 of the 273 wrong ones
-    missed by more than all of it; on the second family (seeds 1-8) 0.85 and 717 of 1,045."""
+    nothing to review). On the first synthetic family (seeds 0-4) no automatic loop within
+    1 m of its place misses by more than 0.185 of its path beyond ``closure_slack``, where
+    the tolerance allows 0.2 (``closure_rate``); on the second family (seeds 157-171,
+    checked afterwards) 5 of 1,763 do (turns misread), and the false automatic loop that
+    a rate of 0.6 let through (a figure eight's look-alike side street 35 m away) misses by
+    0.25 (``benchmarks/results/closure_rate_seventeenth.md``)."""
     out = status.copy()
     far = c.closure > reckoning_tolerance(c.b - c.a, params)   # NaN: False
     out[(status == "candidate") & far] = ""
