@@ -28,7 +28,6 @@ from engine.params import MapParams, Parameter
 PHOTOMETRIC_ITEMS = (("As the method asks", None),) + tuple((v.capitalize(), v) for v in PHOTOMETRIC)
 
 
-
 def photometric_applies(descriptor: str) -> bool:
     """Whether ``descriptor`` has the ``photometric`` option (engine.validate's options table)."""
     from engine.validate import ALLOWED_OPTIONS
