@@ -463,15 +463,16 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
     Returns arrays of len(a): ``inliers``, ``matches`` (int64), ``inlier_ratio`` (float32),
     ``yaw_deg`` (float64, of the frames as stored: add the shifts back with
     ``yaw_of_originals``; NaN for model 'none'), ``model`` (int8, ``MODEL_CODES``),
-    ``motion_deg`` (``motion_azimuth`` of the essential model; NaN for the other models) and
-    ``plane_share`` (``plane_share`` of the essential model's inliers; NaN otherwise).
+    ``motion_deg`` (``motion_azimuth`` of the essential model; NaN for the other models),
+    ``plane_share`` (``plane_share`` of the essential model's inliers; NaN otherwise) and
+    ``parallax_deg`` (``parallax`` of the model's inliers; NaN for model 'none').
     """
     a, b = np.asarray(a, np.int64).ravel(), np.asarray(b, np.int64).ravel()
     n = a.size
     out = {"inliers": np.zeros(n, np.int64), "matches": np.zeros(n, np.int64),
            "inlier_ratio": np.zeros(n, np.float32), "yaw_deg": np.full(n, np.nan),
            "model": np.zeros(n, np.int8), "motion_deg": np.full(n, np.nan),
-           "plane_share": np.full(n, np.nan)}
+           "plane_share": np.full(n, np.nan), "parallax_deg": np.full(n, np.nan)}
     cache: dict[int, LocalFeatures] = {}
 
     def feats(i: int) -> LocalFeatures:
@@ -486,6 +487,7 @@ def verify_pairs(table: FeatureTable, a: np.ndarray, b: np.ndarray, seed: int = 
         out["model"][k] = MODEL_CODES[tv.model]
         if tv.yaw_deg is not None:
             out["yaw_deg"][k] = tv.yaw_deg
+            out["parallax_deg"][k] = parallax(tv)
         if tv.model == "essential" and tv.translation is not None:
             out["motion_deg"][k] = motion_azimuth(tv.rotation, tv.translation)
             m = tv.inlier_mask
@@ -588,6 +590,25 @@ def baseline_ratio(loop: TwoView, loop_end: int, step: TwoView, step_end: int) -
     if len(common) < COMMON_POINTS_MIN:
         return float("nan")
     return float(np.median([in_step[k] / in_loop[k] for k in common]))
+
+
+def parallax(tv: TwoView) -> float:
+    """How far the nearer matched points moved across the two views beyond the turn: the 90th
+    percentile (degrees) of the angle between each inlier's bearing in b and its bearing in a
+    turned by the model's rotation; NaN for model 'none'.
+
+    Turning alone moves every point by the rotation and leaves no parallax; a step moves
+    near points (the ground below a panorama, walls beside it) by degrees and far ones
+    hardly at all, so the upper tail says whether the camera moved, and the median (often
+    the far scenery outdoors) cannot. The essential model's one-dimensional test leaves
+    noise along the epipolar circle in its inliers, so a camera that did not move still
+    shows a degree or two (``engine.loop_closure.STILL_PARALLAX_DEG``)."""
+    if tv.model == "none":
+        return float("nan")
+    m = tv.inlier_mask
+    turned = bearings(tv.uv_a[m]) @ np.asarray(tv.rotation, np.float64).T
+    cos = np.clip(np.einsum("ij,ij->i", turned, bearings(tv.uv_b[m])), -1.0, 1.0)
+    return float(np.degrees(np.percentile(np.arccos(cos), 90)))
 
 
 def motion_azimuth(r: np.ndarray, t: np.ndarray) -> float:

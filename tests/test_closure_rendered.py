@@ -77,3 +77,16 @@ def test_dead_reckoning_follows_the_true_path(routes, route):
     P = MapParams()
     assert (np.abs(est - truth) <= P.closure_slack + P.closure_rate * n).all()
     assert np.abs(est - truth).max() < 0.25 * rows.size
+
+
+def test_nodes_cut_while_the_robot_turns_on_the_spot_add_no_distance(routes):
+    """The reverse drive turns round on the spot, and the node cutter makes nodes while it
+    turns (the view changes); dead reckoning reads exactly those steps as going nowhere
+    (``STILL_PARALLAX_DEG``) and every step the robot drove as one step."""
+    rows, track = _track(routes["reverse"])
+    x, y = synth2.poses_for("reverse", 0).at(routes["reverse"].stamps[rows])
+    true_length = np.hypot(np.diff(x), np.diff(y))
+    read_length = np.linalg.norm(np.diff(track, axis=0), axis=1)
+    stood = true_length < 0.1
+    assert stood.any()                                   # the route has a turn on the spot
+    assert np.array_equal(read_length < 0.5, stood)

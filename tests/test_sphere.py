@@ -6,8 +6,9 @@ import pytest
 
 from engine.features import FeatureTable, LocalFeatures, extract
 from engine.shift import apply_shift, canonical_shift, relative_yaw
+from engine.loop_closure import STILL_PARALLAX_DEG
 from engine.sphere import (COMMON_POINTS_MIN, MODEL_CODES, TwoView, _decompose, baseline_ratio, bearings, motion_azimuth,
-                           plane_share, to_uv,
+                           parallax, plane_share, to_uv,
                            two_view, verify_pairs, yaw_of_originals, yaw_of_rotation)
 
 DATA = Path(__file__).parent / "data"
@@ -144,7 +145,7 @@ def test_verify_pairs_gives_one_row_per_pair(pano):
     table = FeatureTable.from_list([extract(pano), extract(rolled), extract(np.roll(pano[::-1], 50, axis=1)),
                                     LocalFeatures(np.zeros((0, 2), np.float32), np.zeros((0, 128), np.uint8))])
     out = verify_pairs(table, np.array([0, 0, 0]), np.array([1, 2, 3]))
-    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model", "motion_deg", "plane_share"}
+    assert set(out) == {"inliers", "matches", "inlier_ratio", "yaw_deg", "model", "motion_deg", "plane_share", "parallax_deg"}
     assert all(v.shape == (3,) for v in out.values())
     assert out["model"][0] == MODEL_CODES["rotation"] and out["inliers"][0] > 5 * out["inliers"][1]
     assert abs(_wrap(out["yaw_deg"][0] - relative_yaw(pano, rolled)[0])) < 2.0
@@ -270,3 +271,24 @@ def test_a_step_forward_on_a_street_reads_forwards_when_far_points_outnumber_nea
         got_r, got_t = _decompose(fitted / np.linalg.norm(fitted), a, b)
         wrong += abs(motion_azimuth(got_r, got_t)) > 30.0
     assert wrong == 0
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_camera_that_turned_where_it_stood_shows_no_parallax_and_one_that_stepped_does(seed):
+    # A room 1.5-10 m around the camera, seen with about a pixel of noise (256 columns) and
+    # a few wrong matches; turned by 70 degrees on the spot, or stepping 0.8 m (a node step).
+    rng = np.random.default_rng(seed)
+    n = 300
+    room = bearings(np.stack([rng.random(n), rng.uniform(0.1, 0.9, n)], axis=1)) * rng.uniform(1.5, 10.0, (n, 1))
+    desc = rng.integers(0, 256, (n, 128)).astype(np.uint8)
+
+    def seen(points):
+        uv = to_uv(points) + rng.normal(0, 1.0 / 512, (n, 2))
+        return LocalFeatures((uv % 1).astype(np.float32), desc)
+
+    turn = _rot(2, 70.0)
+    here = seen(room)
+    stood = two_view(here, seen(room @ turn.T))
+    stepped = two_view(here, seen((room - np.array([0.8, 0.1, 0.0])) @ turn.T))
+    assert stood.model != "none" and stepped.model == "essential"
+    assert parallax(stood) < STILL_PARALLAX_DEG < parallax(stepped)
