@@ -234,8 +234,8 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
     pair = _verified(features, node_rows, a, b, cache)
     out["matches"], out["inliers"] = pair[:, 0].astype(np.int64), pair[:, 1].astype(np.int64)
     out["inlier_ratio"], out["yaw"], out["plane_share"] = pair[:, 2], pair[:, 3], pair[:, 5]
-    out["path_inliers"] = np.maximum(_neighbour_inliers(features, node_rows, a, gap, cache),
-                                     _neighbour_inliers(features, node_rows, b, gap, cache))
+    out["path_inliers"] = np.maximum(_neighbour_inliers(features, node_rows, a, gap, cache, partners=b),
+                                     _neighbour_inliers(features, node_rows, b, gap, cache, partners=a))
     out["step_inliers"] = np.minimum(_neighbour_inliers(features, node_rows, a, 1, cache),
                                      _neighbour_inliers(features, node_rows, b, 1, cache))
     near = np.flatnonzero(out["inliers"] >= max(int(distance_from), 1))
@@ -345,14 +345,18 @@ def _turns_read(geo: np.ndarray, features, node_rows: np.ndarray, shifts: np.nda
     return geo
 
 
-def _neighbour_inliers(features, node_rows: np.ndarray, ends: np.ndarray, gap: int, cache: dict) -> np.ndarray:
+def _neighbour_inliers(features, node_rows: np.ndarray, ends: np.ndarray, gap: int, cache: dict,
+                       partners: Optional[np.ndarray] = None) -> np.ndarray:
     """Inliers of each node in ``ends`` with the node ``gap`` before or after it on the path,
-    whichever shares more (0 where neither exists)."""
+    whichever shares more (0 where neither exists); never with its loop's other end
+    (``partners``): a loop exactly ``gap`` nodes long would be its own reference."""
     m = node_rows.size
     best = np.zeros(ends.size, np.int64)
     for step in (-gap, gap):
         other = ends + step
         ok = (other >= 0) & (other < m)
+        if partners is not None:
+            ok &= other != partners
         if ok.any():
             lo, hi = np.minimum(ends[ok], other[ok]), np.maximum(ends[ok], other[ok])
             ref = _verified(features, node_rows, lo, hi, cache)[:, 1].astype(np.int64)

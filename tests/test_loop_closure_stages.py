@@ -297,3 +297,29 @@ def test_a_real_u_turn_needed_by_the_loops_of_the_return_keeps_them_all():
     c = matches(a=[10], b=[40], score=[8])
     c.closure = np.array([0.5])
     assert lone_turns(c, np.array(["auto"], dtype=object), {100: _straight_track(200)}, P).tolist() == ["auto"]
+
+
+def test_a_loop_as_long_as_the_temporal_window_is_not_its_own_reference_of_the_path():
+    # Node 6 comes back to node 0's spot (a tight turn); every other node sees a scene of
+    # its own. The path's reference for the loop (what an end shares with the node just
+    # outside the temporal window) must be a node other than the loop's other end: the
+    # geometry beyond the path's own is the whole loop here, not nothing.
+    from engine.features import FeatureTable, LocalFeatures
+    from engine.loop_closure import geometry
+    from engine.sphere import bearings, to_uv
+
+    rng = np.random.default_rng(0)
+
+    def view(scene, desc, at):
+        return LocalFeatures((to_uv(scene - at) % 1).astype(np.float32), desc)
+
+    def scene():
+        points = bearings(np.stack([rng.random(200), rng.uniform(0.1, 0.9, 200)], 1)) * rng.uniform(2, 8, (200, 1))
+        return points, rng.integers(0, 256, (200, 128)).astype(np.uint8)
+
+    place = scene()
+    views = [view(*place, np.zeros(3)) if k in (0, 6) else view(*scene(), np.zeros(3)) for k in range(13)]
+    views[6] = view(*place, np.array([0.3, 0.1, 0.0]))
+    geo = geometry(FeatureTable.from_list(views), np.arange(13), np.array([0]), np.array([6]), gap=6, cache={})
+    assert geo["inliers"][0] > 100
+    assert geo["path_inliers"][0] < geo["inliers"][0] / 4
