@@ -218,7 +218,8 @@ def geometry(features, node_rows: np.ndarray, a: np.ndarray, b: np.ndarray, gap:
 
     Returns arrays ``matches``, ``inliers`` (-1 where there are no features), ``inlier_ratio``,
     ``yaw`` (degrees, shifted frames; NaN where no model), ``path_inliers`` (the larger
-    count of the two ends with their path neighbours, before or after), ``step_inliers``
+    count of the two ends with their path neighbours, before or after, other than the
+    loop's other end), ``step_inliers``
     (each end's count with its nearer-sharing next node, before or after; the smaller end's)
     ``plane_share`` (share of the pair's inliers on one plane, ``engine.sphere.plane_share``;
     NaN without an essential model) and ``distance_steps`` (``_distance_steps``, for pairs with
