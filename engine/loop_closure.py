@@ -680,16 +680,17 @@ def path_track(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width:
     """Dead-reckoned node positions (m, 2), in node steps, or None without features.
 
     Each step from node i to i + 1 is one unit long (nodes are cut where the view has
-    changed by about the same amount, and samples come at a steady rate), or none where
-    its views show no parallax (``STILL_PARALLAX_DEG``: the camera turned where it stood), in the direction
-    the essential model of the pair puts i + 1 seen from i (``engine.sphere.motion_azimuth``,
-    turned by i's heading); where the pair has no essential model the direction of the
-    step before is kept (a robot keeps moving the way it moved); so too at the ``overruled``
-    steps (stage 8a: their model was the wrong one). On the first synthetic
-    family (seeds 0-4) the path between the two visits of a place misses meeting by at
-    most 2 steps on short returns and 0.185 of its length beyond that (a curve indoors read
-    31 degrees short; 0.08 elsewhere, since the seventeenth round's sign of the motion,
-    ``engine.sphere._decompose``): the numbers of ``closure_slack`` and ``closure_rate``."""
+    changed by about the same amount, and samples come at a steady rate), or none where its
+    views show no parallax (``STILL_PARALLAX_DEG``: the camera turned where it stood), in
+    the direction the essential model of the pair puts i + 1 seen from i
+    (``engine.sphere.motion_azimuth``, turned by i's heading); where the pair has no
+    essential model the direction of the step before is kept (a robot keeps moving the way
+    it moved); so too at the ``overruled`` steps (stage 8a: their model was the wrong one).
+    On the first synthetic family (seeds 0-4) the path between the two visits of a place
+    misses meeting by at most 2 steps on short returns and 0.175 of its length beyond that
+    (a curve indoors read 31 degrees short; 0.08 elsewhere, since the seventeenth round's
+    sign of the motion, ``engine.sphere._decompose``; 0.185 before still steps counted no
+    distance): the numbers of ``closure_slack`` and ``closure_rate``."""
     if features is None or headings is None or node_rows.size < 2:
         return None
     steps = np.arange(node_rows.size - 1)
@@ -728,7 +729,7 @@ def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     An automatic loop there goes back to "candidate" (strong evidence against the path: a
     person decides); a candidate there is dropped (weak evidence and the path against it:
     nothing to review). On the first synthetic family (seeds 0-4) no automatic loop within
-    1 m of its place misses by more than 0.185 of its path beyond ``closure_slack``, where
+    1 m of its place misses by more than 0.175 of its path beyond ``closure_slack``, where
     the tolerance allows 0.2 (``closure_rate``); on the second family (seeds 157-171,
     checked afterwards) 5 of 1,763 do (turns misread), and the false automatic loop that
     a rate of 0.6 let through (a figure eight's look-alike side street 35 m away) misses by

@@ -158,7 +158,9 @@ PARAMETERS: tuple[Parameter, ...] = (
               "step without a model), 0.08 elsewhere: 0.2. Earlier 0.6 (0.53, one wrong turn "
               "indoors), and 0.37 re-measured in the fifteenth round (steps read backwards "
               "outdoors; 0.4 then not taken: benchmarks/results/closure_rate_fifteenth.md, "
-              "benchmarks/results/closure_rate_seventeenth.md)", 0.0, 10.0),
+              "benchmarks/results/closure_rate_seventeenth.md). Eighteenth round, steps "
+              "without parallax counting no distance: at most 0.175, still 0.2 "
+              "(benchmarks/results/families_eighteenth.md)", 0.0, 10.0),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 
