@@ -318,8 +318,8 @@ def test_a_loop_as_long_as_the_temporal_window_is_not_its_own_reference_of_the_p
         return points, rng.integers(0, 256, (200, 128)).astype(np.uint8)
 
     place = scene()
-    views = [view(*place, np.zeros(3)) if k in (0, 6) else view(*scene(), np.zeros(3)) for k in range(13)]
-    views[6] = view(*place, np.array([0.3, 0.1, 0.0]))
+    views = [view(*scene(), np.zeros(3)) for _ in range(13)]
+    views[0], views[6] = view(*place, np.zeros(3)), view(*place, np.array([0.3, 0.1, 0.0]))
     geo = geometry(FeatureTable.from_list(views), np.arange(13), np.array([0]), np.array([6]), gap=6, cache={})
     assert geo["inliers"][0] > 100
     assert geo["path_inliers"][0] < geo["inliers"][0] / 4

@@ -275,8 +275,8 @@ def test_a_step_forward_on_a_street_reads_forwards_when_far_points_outnumber_nea
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_a_camera_that_turned_where_it_stood_shows_no_parallax_and_one_that_stepped_does(seed):
-    # A room 1.5-10 m around the camera, seen with about a pixel of noise (256 columns) and
-    # a few wrong matches; turned by 70 degrees on the spot, or stepping 0.8 m (a node step).
+    # A room 1.5-10 m around the camera, seen with about a pixel of noise (256 columns);
+    # turned by 70 degrees on the spot, or stepping 0.8 m (a node step).
     rng = np.random.default_rng(seed)
     n = 300
     room = bearings(np.stack([rng.random(n), rng.uniform(0.1, 0.9, n)], axis=1)) * rng.uniform(1.5, 10.0, (n, 1))
