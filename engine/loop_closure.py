@@ -29,9 +29,9 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 7. ``tiers``        auto (the two visits are as close as one node step: they share as many
                     inliers, or measure closer while sharing a good part of a step's inliers)
                     or candidate (for a person), by the thresholds.
-   ``nearest``      a match that geometry confirms as the same scene, not yet as the same
-                    place, moves to the pair up to half of ``place_radius`` nodes beside it
-                    whose views measure closest,
+   ``nearest``      a match not yet automatic moves to the pair of its place whose views
+                    measure closest (the pairs stage 4 set aside for it and, where geometry
+                    confirms the scene, those up to half of ``place_radius`` nodes beside it),
                     when those are at most ``auto_distance_steps`` apart (an automatic loop).
 8a. ``half_turns``  a path step that read a straight step as a half turn (a scene that looks
                     the same turned round) is turned back where the automatic loops on both
@@ -451,13 +451,15 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     return np.where(auto, "auto", np.where(cand, "candidate", ""))
 
 
-def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node_rows: np.ndarray,
-            shifts: np.ndarray, frame_width: int, params: MapParams, cache: dict) -> tuple[Matches, np.ndarray]:
-    """Stage 7b: a match with ``auto_inliers`` that stage 7 did not make automatic moves to
-    the pair up to ``place_radius`` // 2 nodes beside it (on either end or both) whose two
-    views measure closest (``distance_steps``), when that pair passes stage 7 by its
-    measured distance (score, inliers, measured share, plane share and at most
-    ``auto_distance_steps`` apart); it then is that pair.
+def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, stats, features,
+            node_rows: np.ndarray, shifts: np.ndarray, frame_width: int, params: MapParams,
+            cache: dict) -> tuple[Matches, np.ndarray]:
+    """Stage 7b: a match that stage 7 did not make automatic moves to the pair of its place
+    whose two views measure closest (``distance_steps``), when that pair passes stage 7 by
+    its measured distance (score, inliers, measured share, plane share and at most
+    ``auto_distance_steps`` apart); it then is that pair. The pairs of its place: those
+    stage 4 set aside for it (``_set_aside_for``) and, for a match with ``auto_inliers``,
+    every pair up to ``place_radius`` // 2 nodes beside it (on either end or both).
 
     Stage 4 keeps of each place the pair with the best descriptor evidence, but where two
     paths only touch (a crossing, a return offset to one side, a figure eight's lobe end)
@@ -474,20 +476,34 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     55-96 604 -> 611/723, no new false loop. The seventh round's walk from neighbour to
     neighbour up to ``place_radius`` met three false loops on a texture repeated along a
     block (measured 0.22-0.33 steps); stage 7's measured share, added after it, is part of
-    this test. Costs up to 24 more two-view fits per such match (cached with the others)."""
+    this test. Costs up to 24 more two-view fits per such match (cached with the others).
+
+    Nineteenth round: the pairs stage 4 set aside. Stage 4 keeps of a place the pair with the
+    best descriptor evidence and sets aside the others of the place; the pair whose views
+    are closest can be among them, further along than two nodes (the start of a block lap
+    seen again four nodes before the lap's end, a crossing whose best descriptor pair is
+    three nodes past it), or beside a match with too few inliers to be given the 24
+    neighbours. The pairs set aside were retrieved and passed stage 4's score, so they are
+    the descriptor's own candidates for this place, no new number, and each costs one
+    two-view fit. A pair set aside can lie within ``place_radius`` of another match's place
+    too; it does not give a place that has an automatic loop a second one. First family
+    (seeds 0-4): the same places (42/50), no false loop, queue 75 -> 74 entries. Looked-at
+    second family: 157-171 the same places (224/253), 202-219 273 -> 276/335, no false loop."""
     m = node_rows.size
-    todo = np.flatnonzero((status != "auto") & (c.inliers >= params.auto_inliers))
-    half = params.place_radius // 2
-    if features is None or todo.size == 0 or half == 0:
+    todo = np.flatnonzero(status != "auto")
+    if features is None or todo.size == 0:
         return c, status
-    reach = np.arange(-half, half + 1)
-    da, db = (d.ravel() for d in np.meshgrid(reach, reach))
-    beside = (da != 0) | (db != 0)
-    da, db = da[beside], db[beside]
-    na, nb = (c.a[todo, None] + da).ravel(), (c.b[todo, None] + db).ravel()
-    owner = np.repeat(todo, da.size)
+    na, nb, owner = _beside(c, todo[c.inliers[todo] >= params.auto_inliers], params.place_radius // 2)
+    sa, sb, so = _set_aside_for(c, todo, set_aside, params.place_radius)
+    # each (owner, pair) once; a pair both beside its owner and set aside for it counts as beside
+    pairs = np.stack([np.concatenate([owner, so]), np.concatenate([na, sa]), np.concatenate([nb, sb])], axis=1)
+    aside = np.concatenate([np.zeros(owner.size, bool), np.ones(so.size, bool)])
+    _, first = np.unique(pairs.reshape(-1, 3), axis=0, return_index=True)
+    owner, na, nb, aside = pairs[first, 0], pairs[first, 1], pairs[first, 2], aside[first]
     ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
-    na, nb, owner = na[ok], nb[ok], owner[ok]
+    na, nb, owner, aside = na[ok], nb[ok], owner[ok], aside[ok]
+    if owner.size == 0:
+        return c, status
     cos, score = calibrate(v, stats, na, nb)
     n = Matches(a=na, b=nb, cosine=cos, score=score)
     n.support, n.direction = support(v, stats, na, nb, params)
@@ -495,15 +511,67 @@ def nearest(c: Matches, status: np.ndarray, v: np.ndarray, stats, features, node
     n.confidence = confidence(n)
     close = tiers(n, params, share_steps=False) == "auto"      # by the measured distance alone
     c, status = c.take(np.arange(len(c))), status.copy()
-    for i in todo:
+    # A pair set aside may lie nearer another match's place than its owner's: a match does
+    # not move to one within place_radius of an automatic loop (the most confident moves
+    # first), so that a place closed already does not get a second loop through them.
+    closed = [(int(x), int(y)) for x, y in zip(c.a[status == "auto"], c.b[status == "auto"])]
+    r = params.place_radius
+    for i in todo[np.lexsort((c.b[todo], c.a[todo], -c.confidence[todo]))]:
         mine = np.flatnonzero(close & (owner == i))
-        if mine.size:
-            j = mine[np.argmin(n.distance_steps[mine])]
+        mine = mine[np.argsort(n.distance_steps[mine], kind="stable")]
+        free = [j for j in mine.tolist() if not aside[j] or
+                not any(abs(int(na[j]) - x) <= r and abs(int(nb[j]) - y) <= r for x, y in closed)]
+        if free:
+            j = free[0]
+            closed.append((int(na[j]), int(nb[j])))
             for key, value in n.__dict__.items():
                 if value is not None and getattr(c, key) is not None:
                     getattr(c, key)[i] = value[j]
             status[i] = "auto"
     return c, status
+
+
+def _beside(c: Matches, owners: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, owner) of every pair up to ``half`` nodes beside each match ``owners`` (on
+    either end or both; the match itself left out), not yet checked against the recording."""
+    reach = np.arange(-half, half + 1)
+    da, db = (d.ravel() for d in np.meshgrid(reach, reach))
+    beside = (da != 0) | (db != 0)
+    da, db = da[beside], db[beside]
+    return ((c.a[owners, None] + da).ravel(), (c.b[owners, None] + db).ravel(),
+            np.repeat(owners, da.size))
+
+
+def _set_aside_for(c: Matches, todo: np.ndarray, set_aside: Matches, radius: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(a, b, owner) of the matches stage 4 set aside for a match in ``todo``: of the kept
+    matches within ``radius`` nodes of it on both ends, the one stage 4 ranks first (score
+    and positive support; ties to the earlier pair), where that one is in ``todo`` (a pair
+    set aside for an automatic loop belongs to a place already closed). Kept matches are
+    bucketed as in ``one_per_place``."""
+    empty = np.zeros(0, np.int64)
+    if set_aside is None or len(set_aside) == 0 or todo.size == 0:
+        return empty, empty, empty
+    rank = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)    # stage 4's ranking
+    cell = max(int(radius), 0) + 1
+    buckets: dict[tuple[int, int], list[int]] = {}
+    for i in range(len(c)):
+        buckets.setdefault((int(c.a[i]) // cell, int(c.b[i]) // cell), []).append(i)
+    in_todo = np.zeros(len(c), bool)
+    in_todo[todo] = True
+    out = []
+    for sa, sb in zip(set_aside.a.tolist(), set_aside.b.tolist()):
+        near = [i for da in (-1, 0, 1) for db in (-1, 0, 1)
+                for i in buckets.get((sa // cell + da, sb // cell + db), ())
+                if abs(int(c.a[i]) - sa) <= radius and abs(int(c.b[i]) - sb) <= radius]
+        if near:
+            first = min(near, key=lambda i: (-rank[i], int(c.a[i]), int(c.b[i])))
+            if in_todo[first]:
+                out.append((sa, sb, first))
+    if not out:
+        return empty, empty, empty
+    a, b, owner = (np.asarray(x, np.int64) for x in zip(*out))
+    return a, b, owner
 
 
 # Heading drift per node step along the path, degrees (consecutive alignments err by a few
@@ -872,13 +940,15 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     c = c.take((c.score >= params.candidate_z - GEOMETRY_MARGIN_Z)
                | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
     c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
-    c = c.take(one_per_place(c, params.place_radius))                  # 4
+    kept = one_per_place(c, params.place_radius)                       # 4
+    set_aside, c = c.take(~kept), c.take(kept)
     measure(c, features, node_rows, shifts, frame_width, params, cache)   # 5
     if columns is not None and len(c):
         c.yaw = np.where(np.isfinite(c.yaw), c.yaw, column_yaw(columns, c.a, c.b, shifts, frame_width))
     c.confidence = confidence(c)                                       # 6
     status = tiers(c, params)                                          # 7
-    c, status = nearest(c, status, v, stats, features, node_rows, shifts, frame_width, params, cache)   # 7b
+    c, status = nearest(c, status, set_aside, v, stats, features, node_rows, shifts, frame_width,
+                        params, cache)                                 # 7b
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
     headings, overruled = half_turns(c, status, headings, params)     # 8a
     track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)

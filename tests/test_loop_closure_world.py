@@ -102,3 +102,21 @@ def test_a_crossing_kept_two_nodes_off_moves_to_where_the_two_paths_touch():
     auto = [lc for lc in loops if lc.status == "auto"]
     assert any(crossing in (lc.a, lc.b) for lc in auto), [(lc.a, lc.b, lc.status) for lc in loops]
     assert all(np.linalg.norm(path[lc.a] - path[lc.b]) <= 1.0 for lc in auto)
+
+
+def test_a_crossing_kept_four_nodes_off_closes_where_the_paths_touch_through_the_pairs_set_aside():
+    # The descriptor prefers node 16 of the first leg (x = 12.8, 2.9 m away), beyond stage
+    # 7b's two nodes beside it, and finds node 13 (0.5 m away) alike too, but less: stage 4
+    # keeps the first and sets the other aside for it. The pairs set aside are the place's
+    # other pairs; the closest one closes it, and the place gets one automatic loop.
+    points, desc = _world()
+    path = _path()
+    crossing = 25 + 12 + 11 + 12 - 1
+    v = _descriptors(path, crossing, look_alike=16)
+    v[crossing] = v[16] + 0.3 * v[13]
+    v[crossing] /= np.linalg.norm(v[crossing])
+    table = _features(path, points, desc)
+    loops = detect_loops(v, MapParams(), node_rows=np.arange(len(path)), features=table)
+    auto = [lc for lc in loops if lc.status == "auto"]
+    assert [crossing in (lc.a, lc.b) for lc in auto] == [True], [(lc.a, lc.b, lc.status) for lc in loops]
+    assert np.linalg.norm(path[auto[0].a] - path[auto[0].b]) <= 1.0
