@@ -488,7 +488,8 @@ def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, s
     two-view fit. A pair set aside can lie within ``place_radius`` of another match's place
     too; it does not give a place that has an automatic loop a second one. First family
     (seeds 0-4): the same places (42/50), no false loop, queue 75 -> 74 entries. Looked-at
-    second family: 157-171 the same places (224/253), 202-219 273 -> 276/335, no false loop."""
+    second family: 157-171 the same places (224/253), 190-201 169 -> 171/199, 202-219
+    273 -> 276/335, no false loop."""
     m = node_rows.size
     todo = np.flatnonzero(status != "auto")
     if features is None or todo.size == 0:
