@@ -515,16 +515,26 @@ def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, s
     # A pair set aside may lie nearer another match's place than its owner's: a match does
     # not move to one within place_radius of an automatic loop (the most confident moves
     # first), so that a place closed already does not get a second loop through them.
-    closed = [(int(x), int(y)) for x, y in zip(c.a[status == "auto"], c.b[status == "auto"])]
     r = params.place_radius
+    cell = max(int(r), 0) + 1
+    closed: dict[tuple[int, int], list[tuple[int, int]]] = {}   # bucketed as in one_per_place
+
+    def close_place(x: int, y: int) -> None:
+        closed.setdefault((x // cell, y // cell), []).append((x, y))
+
+    def in_closed_place(x: int, y: int) -> bool:
+        return any(abs(x - u) <= r and abs(y - w) <= r for da in (-1, 0, 1) for db in (-1, 0, 1)
+                   for u, w in closed.get((x // cell + da, y // cell + db), ()))
+
+    for x, y in zip(c.a[status == "auto"].tolist(), c.b[status == "auto"].tolist()):
+        close_place(x, y)
     for i in todo[np.lexsort((c.b[todo], c.a[todo], -c.confidence[todo]))]:
         mine = np.flatnonzero(close & (owner == i))
         mine = mine[np.argsort(n.distance_steps[mine], kind="stable")]
-        free = [j for j in mine.tolist() if not aside[j] or
-                not any(abs(int(na[j]) - x) <= r and abs(int(nb[j]) - y) <= r for x, y in closed)]
+        free = [j for j in mine.tolist() if not aside[j] or not in_closed_place(int(na[j]), int(nb[j]))]
         if free:
             j = free[0]
-            closed.append((int(na[j]), int(nb[j])))
+            close_place(int(na[j]), int(nb[j]))
             for key, value in n.__dict__.items():
                 if value is not None and getattr(c, key) is not None:
                     getattr(c, key)[i] = value[j]
