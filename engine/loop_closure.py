@@ -167,25 +167,39 @@ GEOMETRY_MARGIN_Z = 1.0
 INLIERS_PER_Z = 20.0
 
 
+class _PlaceGrid:
+    """Node pairs (a, b) bucketed on a grid of ``radius + 1`` nodes, so that the pairs within
+    ``radius`` nodes of a pair on both ends are found in nine buckets, not among all pairs."""
+
+    def __init__(self, radius: int):
+        self.radius = max(int(radius), 0)
+        self.cell = self.radius + 1
+        self.buckets: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+
+    def add(self, a: int, b: int, item: int = -1) -> None:
+        self.buckets.setdefault((a // self.cell, b // self.cell), []).append((a, b, item))
+
+    def near(self, a: int, b: int) -> list[int]:
+        """The items of the pairs within ``radius`` nodes of (a, b) on both ends."""
+        ka, kb, r = a // self.cell, b // self.cell, self.radius
+        return [item for da in (-1, 0, 1) for db in (-1, 0, 1)
+                for u, w, item in self.buckets.get((ka + da, kb + db), ())
+                if abs(u - a) <= r and abs(w - b) <= r]
+
+
 def one_per_place(c: Matches, radius: int) -> np.ndarray:
     """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
     both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
-    ``radius`` nodes or so, not one per node pair. Kept matches are bucketed on a grid of
-    ``radius + 1`` nodes, so each test looks at nine buckets, not at every kept match."""
+    ``radius`` nodes or so, not one per node pair."""
     keep = np.ones(len(c), bool)
     order = np.lexsort((c.b, c.a, -c.confidence))
-    cell = max(int(radius), 0) + 1
-    buckets: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    kept = _PlaceGrid(radius)
     for i in order:
         ai, bi = int(c.a[i]), int(c.b[i])
-        ka, kb = ai // cell, bi // cell
-        near = any(abs(ta - ai) <= radius and abs(tb - bi) <= radius
-                   for da in (-1, 0, 1) for db in (-1, 0, 1)
-                   for ta, tb in buckets.get((ka + da, kb + db), ()))
-        if near:
+        if kept.near(ai, bi):
             keep[i] = False
         else:
-            buckets.setdefault((ka, kb), []).append((ai, bi))
+            kept.add(ai, bi)
     return keep
 
 
@@ -515,26 +529,16 @@ def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, s
     # A pair set aside may lie nearer another match's place than its owner's: a match does
     # not move to one within place_radius of an automatic loop (the most confident moves
     # first), so that a place closed already does not get a second loop through them.
-    r = params.place_radius
-    cell = max(int(r), 0) + 1
-    closed: dict[tuple[int, int], list[tuple[int, int]]] = {}   # bucketed as in one_per_place
-
-    def close_place(x: int, y: int) -> None:
-        closed.setdefault((x // cell, y // cell), []).append((x, y))
-
-    def in_closed_place(x: int, y: int) -> bool:
-        return any(abs(x - u) <= r and abs(y - w) <= r for da in (-1, 0, 1) for db in (-1, 0, 1)
-                   for u, w in closed.get((x // cell + da, y // cell + db), ()))
-
+    closed = _PlaceGrid(params.place_radius)
     for x, y in zip(c.a[status == "auto"].tolist(), c.b[status == "auto"].tolist()):
-        close_place(x, y)
+        closed.add(x, y)
     for i in todo[np.lexsort((c.b[todo], c.a[todo], -c.confidence[todo]))]:
         mine = np.flatnonzero(close & (owner == i))
         mine = mine[np.argsort(n.distance_steps[mine], kind="stable")]
-        free = [j for j in mine.tolist() if not aside[j] or not in_closed_place(int(na[j]), int(nb[j]))]
+        free = [j for j in mine.tolist() if not aside[j] or not closed.near(int(na[j]), int(nb[j]))]
         if free:
             j = free[0]
-            close_place(int(na[j]), int(nb[j]))
+            closed.add(int(na[j]), int(nb[j]))
             for key, value in n.__dict__.items():
                 if value is not None and getattr(c, key) is not None:
                     getattr(c, key)[i] = value[j]
@@ -558,23 +562,19 @@ def _set_aside_for(c: Matches, todo: np.ndarray, set_aside: Matches, radius: int
     """(a, b, owner) of the matches stage 4 set aside for a match in ``todo``: of the kept
     matches within ``radius`` nodes of it on both ends, the one stage 4 ranks first (score
     and positive support; ties to the earlier pair), where that one is in ``todo`` (a pair
-    set aside for an automatic loop belongs to a place already closed). Kept matches are
-    bucketed as in ``one_per_place``."""
+    set aside for an automatic loop belongs to a place already closed)."""
     empty = np.zeros(0, np.int64)
     if set_aside is None or len(set_aside) == 0 or todo.size == 0:
         return empty, empty, empty
     rank = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)    # stage 4's ranking
-    cell = max(int(radius), 0) + 1
-    buckets: dict[tuple[int, int], list[int]] = {}
+    kept = _PlaceGrid(radius)
     for i in range(len(c)):
-        buckets.setdefault((int(c.a[i]) // cell, int(c.b[i]) // cell), []).append(i)
+        kept.add(int(c.a[i]), int(c.b[i]), i)
     in_todo = np.zeros(len(c), bool)
     in_todo[todo] = True
     out = []
     for sa, sb in zip(set_aside.a.tolist(), set_aside.b.tolist()):
-        near = [i for da in (-1, 0, 1) for db in (-1, 0, 1)
-                for i in buckets.get((sa // cell + da, sb // cell + db), ())
-                if abs(int(c.a[i]) - sa) <= radius and abs(int(c.b[i]) - sb) <= radius]
+        near = kept.near(sa, sb)
         if near:
             first = min(near, key=lambda i: (-rank[i], int(c.a[i]), int(c.b[i])))
             if in_todo[first]:
