@@ -187,6 +187,11 @@ class _PlaceGrid:
                 if abs(u - a) <= r and abs(w - b) <= r]
 
 
+def _descriptor_rank(c: Matches) -> np.ndarray:
+    """Stage 4's ranking of a match: calibrated score + positive support (no geometry yet)."""
+    return c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
+
+
 def one_per_place(c: Matches, radius: int) -> np.ndarray:
     """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
     both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
@@ -513,7 +518,7 @@ def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, s
     # each (owner, pair) once; a pair both beside its owner and set aside for it counts as beside
     pairs = np.stack([np.concatenate([owner, so]), np.concatenate([na, sa]), np.concatenate([nb, sb])], axis=1)
     aside = np.concatenate([np.zeros(owner.size, bool), np.ones(so.size, bool)])
-    _, first = np.unique(pairs.reshape(-1, 3), axis=0, return_index=True)
+    _, first = np.unique(pairs, axis=0, return_index=True)
     owner, na, nb, aside = pairs[first, 0], pairs[first, 1], pairs[first, 2], aside[first]
     ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
     na, nb, owner, aside = na[ok], nb[ok], owner[ok], aside[ok]
@@ -566,7 +571,7 @@ def _set_aside_for(c: Matches, todo: np.ndarray, set_aside: Matches, radius: int
     empty = np.zeros(0, np.int64)
     if set_aside is None or len(set_aside) == 0 or todo.size == 0:
         return empty, empty, empty
-    rank = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)    # stage 4's ranking
+    rank = _descriptor_rank(c)
     kept = _PlaceGrid(radius)
     for i in range(len(c)):
         kept.add(int(c.a[i]), int(c.b[i]), i)
@@ -950,7 +955,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     sup = np.nan_to_num(c.support, nan=-np.inf)
     c = c.take((c.score >= params.candidate_z - GEOMETRY_MARGIN_Z)
                | (sup >= params.candidate_z - GEOMETRY_MARGIN_Z))
-    c.confidence = c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
+    c.confidence = _descriptor_rank(c)
     kept = one_per_place(c, params.place_radius)                       # 4
     set_aside, c = c.take(~kept), c.take(kept)
     measure(c, features, node_rows, shifts, frame_width, params, cache)   # 5
