@@ -36,6 +36,10 @@ once in ``engine.params.PARAMETERS`` (with where it came from):
 8a. ``half_turns``  a path step that read a straight step as a half turn (a scene that looks
                     the same turned round) is turned back where the automatic loops on both
                     sides of it agree only without it: the path's headings, repaired.
+8b. ``straight_for_a_loop`` a step read as a half turn is read straight where an automatic
+                    loop across it comes back, in place and in heading, only that way and
+                    no loop across it needs the turn (a crossing passed once more has one
+                    loop, too few for stage 8a).
 9. ``closure``      the path itself must come back: dead reckoning of the path between a
                     loop's ends (headings and directions of motion from the two-view
                     geometry of consecutive nodes, one unit per node step) must meet again,
@@ -835,12 +839,68 @@ def straightened_tracks(features, node_rows: np.ndarray, shifts: np.ndarray, fra
     for k in half_turn_steps(headings, params):
         if k in overruled:
             continue
-        turned_back = headings.copy()
-        turned_back[k + 1:] -= 180.0
-        track = path_track(features, node_rows, shifts, frame_width, turned_back, cache, np.append(overruled, k))
+        track = path_track(features, node_rows, shifts, frame_width, read_straight(headings, k), cache,
+                           np.append(overruled, k))
         if track is not None:
             out[int(k)] = track
     return out
+
+
+def read_straight(headings: np.ndarray, k: int) -> np.ndarray:
+    """The path's headings with step ``k`` (node k to k + 1) turned back by half a turn."""
+    out = np.asarray(headings, np.float64).copy()
+    out[k + 1:] -= 180.0
+    return out
+
+
+def _heading_agrees(c: Matches, headings: np.ndarray, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 8's test for the cycle of one loop and the path between its ends: the loop's
+    ``yaw`` equals the path's turn from a to b up to ``heading_tol`` plus the drift along the
+    path (``(agrees, comparable)``; a tolerance over 90 degrees says nothing, NaN yaw neither)."""
+    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(c.b - c.a)
+    comparable = (tol <= 90.0) & np.isfinite(c.yaw)
+    return comparable & (np.abs(_wrap(c.yaw - (headings[c.b] - headings[c.a]))) <= tol), comparable
+
+
+def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.ndarray],
+                        track: Optional[np.ndarray], straightened: dict[int, np.ndarray],
+                        params: MapParams) -> Optional[int]:
+    """Stage 8b: the step read as a half turn that the path is to read straight, or None.
+
+    Stage 8a turns such a step back where two or more loops on each side agree only
+    without it, and a crossing passed once more has one loop: the second family's crossing
+    returns (seeds 196, 197, 199, 203, 208, 210: one straight step each read as a half turn,
+    63-66 inliers, and the planar reading agreeing) fold the path, dead reckoning then puts
+    the crossing's two visits 46-61 steps apart on paths of 116-138, and stage 9 sends the
+    loop to the queue. A loop has two voices about the path between its ends, each its own
+    stage's test: where it comes back (stage 9: ``closure_slack + closure_rate`` per step)
+    and how it is turned (stage 8, for the cycle of the loop and its path). A step is read
+    straight when an automatic loop across it passes both only with the step straight
+    (``straightened``: the tracks of ``straightened_tracks``), and no automatic loop across
+    it passes either only with the turn: a real turn on the spot (a reverse drive's U-turn)
+    is needed by every loop across it. One step per call, the one most loops ask for; the
+    caller reads it straight and asks again. No new number: stages 8 and 9's tolerances.
+    A false loop could turn a path to fit itself only by falling, once straightened, within
+    stage 9's reach of its place and stage 8's of its heading, where no loop keeps the turn.
+    First family (seeds 0-4, held out 300-301): never applies (no automatic loop asks for a
+    step straight), the same places and queue. Looked-at second family: 190-219
+    447 -> 454/534 places, no false loop."""
+    if track is None or headings is None or not straightened:
+        return None
+    auto = status == "auto"
+    tol = reckoning_tolerance(c.b - c.a, params)
+    comes_back = np.linalg.norm(track[c.b] - track[c.a], axis=1) <= tol
+    turned, comparable = _heading_agrees(c, headings, params)
+    best, most = None, 0
+    for k, straight in straightened.items():
+        across = auto & (c.a <= k) & (k < c.b)
+        comes_back_straight = np.linalg.norm(straight[c.b] - straight[c.a], axis=1) <= tol
+        agrees_straight, _ = _heading_agrees(c, read_straight(headings, k), params)
+        asks = across & comes_back_straight & ~comes_back & agrees_straight
+        needs = across & ((comes_back & ~comes_back_straight) | (comparable & turned & ~agrees_straight))
+        if int(asks.sum()) > most and not needs.any():
+            best, most = int(k), int(asks.sum())
+    return best
 
 
 def lone_turns(c: Matches, status: np.ndarray, straightened: Optional[dict[int, np.ndarray]],
@@ -967,10 +1027,11 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
                         params, cache)                                 # 7b
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
     headings, overruled = half_turns(c, status, headings, params)     # 8a
-    track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)
+    track, straightened = _tracks(features, node_rows, shifts, frame_width, headings, cache, overruled, params)
+    while (k := straight_for_a_loop(c, status, headings, track, straightened, params)) is not None:   # 8b
+        headings, overruled = read_straight(headings, k), np.append(overruled, k).astype(np.int64)
+        track, straightened = _tracks(features, node_rows, shifts, frame_width, headings, cache, overruled, params)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
-    straightened = straightened_tracks(features, node_rows, shifts, frame_width, headings, cache, overruled,
-                                       params) if track is not None else {}
     status = path_checks(c, status, headings, track, params, straightened)   # 9, 9a, 8, 9b
     out = []
     for i in np.flatnonzero(status != ""):
@@ -980,6 +1041,16 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
             status=str(status[i]), evidence=_evidence(c, i)))
     out.sort(key=lambda lc: (lc.a, lc.b))
     return out
+
+
+def _tracks(features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int, headings,
+            cache: dict, overruled: np.ndarray, params: MapParams):
+    """``path_track`` and ``straightened_tracks`` of the path as read now (None and {} without
+    geometry)."""
+    track = path_track(features, node_rows, shifts, frame_width, headings, cache, overruled)
+    if track is None:
+        return None, {}
+    return track, straightened_tracks(features, node_rows, shifts, frame_width, headings, cache, overruled, params)
 
 
 def _evidence(c: Matches, i: int) -> dict:

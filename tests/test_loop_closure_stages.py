@@ -323,3 +323,65 @@ def test_a_loop_as_long_as_the_temporal_window_is_not_its_own_reference_of_the_p
     geo = geometry(FeatureTable.from_list(views), np.arange(13), np.array([0]), np.array([6]), gap=6, cache={})
     assert geo["inliers"][0] > 100
     assert geo["path_inliers"][0] < geo["inliers"][0] / 4
+
+
+def _track_of(headings: np.ndarray) -> np.ndarray:
+    """Dead reckoning of one unit step per node in the direction of the node's heading."""
+    rad = np.radians(headings[:-1])
+    steps = np.stack([np.cos(rad), np.sin(rad)], axis=1)
+    return np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
+
+
+def _two_laps_of_a_block() -> np.ndarray:
+    """Headings of a square block, ten steps a side, driven round twice (80 steps)."""
+    return np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
+
+
+def test_a_crossing_whose_path_reads_a_straight_step_as_a_half_turn_reads_it_straight():
+    from engine.loop_closure import read_straight, straight_for_a_loop
+
+    # The block's corner at node 5 is passed again at node 45, seen as the same heading. The
+    # geometry read the straight step 22 as a half turn: the path as read does not come back.
+    truth = _two_laps_of_a_block()
+    read = truth.copy()
+    read[23:] += 180.0
+    c = matches(a=[5], b=[45], score=[8], yaw=[0.0])
+    status = np.array(["auto"], dtype=object)
+    straightened = {22: _track_of(read_straight(read, 22))}
+    assert np.linalg.norm(_track_of(read)[45] - _track_of(read)[5]) > 10
+    assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) == 22
+    # A candidate is no voice, and without a half turn read there is nothing to read straight.
+    assert straight_for_a_loop(c, np.array(["candidate"], dtype=object), read, _track_of(read), straightened, P) is None
+    assert straight_for_a_loop(c, status, truth, _track_of(truth), {}, P) is None
+
+
+def test_a_loop_turned_against_the_straightened_path_cannot_straighten_it():
+    from engine.loop_closure import read_straight, straight_for_a_loop
+
+    # The same place by position, but its two views turned half round against the path read
+    # straight: its two voices disagree, and the step stays as read.
+    truth = _two_laps_of_a_block()
+    read = truth.copy()
+    read[23:] += 180.0
+    c = matches(a=[5], b=[45], score=[8], yaw=[180.0])
+    status = np.array(["auto"], dtype=object)
+    straightened = {22: _track_of(read_straight(read, 22))}
+    assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) is None
+
+
+def test_a_real_turn_on_the_spot_stays_when_loops_across_it_need_it():
+    from engine.loop_closure import straight_for_a_loop
+
+    # A reverse drive: out 100 steps, a half turn on the spot, back; three loops of the return
+    # come back only through the turn. A fourth loop, a look-alike, would come back with the
+    # turn read straight (a track where its ends meet): the loops that need the turn keep it.
+    headings = _out_and_back_headings()
+    track = _out_and_back(100)
+    straight = _straight_track(200)
+    straight[110] = straight[30]
+    c = matches(a=[20, 50, 80, 30], b=[180, 150, 120, 110], score=[8] * 4, yaw=[180.0, 180.0, 180.0, 0.0])
+    status = np.array(["auto"] * 4, dtype=object)
+    assert straight_for_a_loop(c, status, headings, track, {100: straight}, P) is None
+    # Alone, the look-alike's two voices would read the turn straight: the others are the guard.
+    c1 = matches(a=[30], b=[110], score=[8], yaw=[0.0])
+    assert straight_for_a_loop(c1, np.array(["auto"], dtype=object), headings, track, {100: straight}, P) == 100
