@@ -883,8 +883,10 @@ def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.nd
     A false loop could turn a path to fit itself only by falling, once straightened, within
     stage 9's reach of its place and stage 8's of its heading, where no loop keeps the turn.
     First family (seeds 0-4, held out 300-301): never applies (no automatic loop asks for a
-    step straight), the same places and queue. Looked-at second family: 190-219
-    447 -> 454/534 places, no false loop."""
+    step straight), the same places and queue. Looked-at second family: 157-189
+    502 -> 508/560 places, 190-219 447 -> 454/534, no false loop; held-out 226-231, mapped
+    once: 89/97 (88 with the code before), no false loop
+    (``benchmarks/results/families_twentieth.md``)."""
     if track is None or headings is None or not straightened:
         return None
     auto = status == "auto"

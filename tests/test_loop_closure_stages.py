@@ -332,40 +332,37 @@ def _track_of(headings: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
 
 
-def _two_laps_of_a_block() -> np.ndarray:
-    """Headings of a square block, ten steps a side, driven round twice (80 steps)."""
-    return np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
+def _second_lap_read_with_a_half_turn(loop_yaw: float):
+    """A square block, ten steps a side, driven round twice (80 steps); node 5 is passed again
+    at node 45, seen turned by ``loop_yaw``. The geometry read the straight step 22 as a half
+    turn. Returns the loop, its status, the headings as read, and the step read straight."""
+    from engine.loop_closure import read_straight
+
+    read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
+    read[23:] += 180.0
+    c = matches(a=[5], b=[45], score=[8], yaw=[loop_yaw])
+    return c, np.array(["auto"], dtype=object), read, {22: _track_of(read_straight(read, 22))}
 
 
 def test_a_crossing_whose_path_reads_a_straight_step_as_a_half_turn_reads_it_straight():
     from engine.loop_closure import read_straight, straight_for_a_loop
 
-    # The block's corner at node 5 is passed again at node 45, seen as the same heading. The
-    # geometry read the straight step 22 as a half turn: the path as read does not come back.
-    truth = _two_laps_of_a_block()
-    read = truth.copy()
-    read[23:] += 180.0
-    c = matches(a=[5], b=[45], score=[8], yaw=[0.0])
-    status = np.array(["auto"], dtype=object)
-    straightened = {22: _track_of(read_straight(read, 22))}
+    # As read, the path does not come back; with step 22 straight it does, and the loop's
+    # heading agrees.
+    c, status, read, straightened = _second_lap_read_with_a_half_turn(loop_yaw=0.0)
     assert np.linalg.norm(_track_of(read)[45] - _track_of(read)[5]) > 10
     assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) == 22
     # A candidate is no voice, and without a half turn read there is nothing to read straight.
     assert straight_for_a_loop(c, np.array(["candidate"], dtype=object), read, _track_of(read), straightened, P) is None
-    assert straight_for_a_loop(c, status, truth, _track_of(truth), {}, P) is None
+    assert straight_for_a_loop(c, status, read_straight(read, 22), straightened[22], {}, P) is None
 
 
 def test_a_loop_turned_against_the_straightened_path_cannot_straighten_it():
-    from engine.loop_closure import read_straight, straight_for_a_loop
+    from engine.loop_closure import straight_for_a_loop
 
     # The same place by position, but its two views turned half round against the path read
     # straight: its two voices disagree, and the step stays as read.
-    truth = _two_laps_of_a_block()
-    read = truth.copy()
-    read[23:] += 180.0
-    c = matches(a=[5], b=[45], score=[8], yaw=[180.0])
-    status = np.array(["auto"], dtype=object)
-    straightened = {22: _track_of(read_straight(read, 22))}
+    c, status, read, straightened = _second_lap_read_with_a_half_turn(loop_yaw=180.0)
     assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) is None
 
 
