@@ -869,10 +869,10 @@ def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.nd
 
     Stage 8a turns such a step back where two or more loops on each side agree only
     without it, and a crossing passed once more has one loop: the second family's crossing
-    returns (seeds 196, 197, 199, 203, 208, 210: one straight step each read as a half turn,
-    63-66 inliers, and the planar reading agreeing) fold the path, dead reckoning then puts
-    the crossing's two visits 46-61 steps apart on paths of 116-138, and stage 9 sends the
-    loop to the queue. A loop has two voices about the path between its ends, each its own
+    returns of seeds 196, 197, 199, 203, 208 and 210 each cross one straight step read as a
+    half turn (seed 196: 63 inliers, a 179-degree turn, the planar reading agreeing), which
+    folds the path: dead reckoning puts the crossing's two visits 46-61 steps apart on paths
+    of 116-138, and stage 9 sends the loop to the queue. A loop has two voices about the path between its ends, each its own
     stage's test: where it comes back (stage 9: ``closure_slack + closure_rate`` per step)
     and how it is turned (stage 8, for the cycle of the loop and its path). A step is read
     straight when an automatic loop across it passes both only with the step straight
