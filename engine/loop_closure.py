@@ -643,15 +643,19 @@ def _wrap(deg):
     return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
 
 
-def _cycle_tolerance(a: np.ndarray, b: np.ndarray, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
-    """Stage 8's test for every pair of loops (a[i], b[i]), (a[j], b[j]): how many degrees
-    their cycle of path and loops may miss closing (``heading_tol`` plus the drift along the
-    path between them, growing with the square root of its steps), and whether the pair is
-    near enough along the path to be compared at all (a tolerance over 90 degrees says
-    nothing). Stage 8a asks the same question of the loops across a step."""
-    steps = np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :])
+def _heading_tolerance(steps, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+    """Degrees a cycle of loops and ``steps`` node steps of path may miss closing
+    (``heading_tol`` plus the drift along the path, growing with the square root of its
+    steps), and whether the cycle can be judged at all (a tolerance over 90 degrees says
+    nothing)."""
     tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(steps)
     return tol, tol <= 90.0
+
+
+def _cycle_tolerance(a: np.ndarray, b: np.ndarray, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 8's test for every pair of loops (a[i], b[i]), (a[j], b[j]): ``_heading_tolerance``
+    of the path between them. Stage 8a asks the same question of the loops across a step."""
+    return _heading_tolerance(np.abs(a[:, None] - a[None, :]) + np.abs(b[:, None] - b[None, :]), params)
 
 
 def consistency(c: Matches, status: np.ndarray, headings: Optional[np.ndarray], params: MapParams) -> np.ndarray:
@@ -856,9 +860,9 @@ def read_straight(headings: np.ndarray, k: int) -> np.ndarray:
 def _heading_agrees(c: Matches, headings: np.ndarray, params: MapParams) -> tuple[np.ndarray, np.ndarray]:
     """Stage 8's test for the cycle of one loop and the path between its ends: the loop's
     ``yaw`` equals the path's turn from a to b up to ``heading_tol`` plus the drift along the
-    path (``(agrees, comparable)``; a tolerance over 90 degrees says nothing, NaN yaw neither)."""
-    tol = params.heading_tol + DRIFT_PER_STEP_DEG * np.sqrt(c.b - c.a)
-    comparable = (tol <= 90.0) & np.isfinite(c.yaw)
+    path (``_heading_tolerance``; ``(agrees, comparable)``, NaN yaw not comparable)."""
+    tol, comparable = _heading_tolerance(c.b - c.a, params)
+    comparable = comparable & np.isfinite(c.yaw)
     return comparable & (np.abs(_wrap(c.yaw - (headings[c.b] - headings[c.a]))) <= tol), comparable
 
 
@@ -872,13 +876,14 @@ def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.nd
     returns of seeds 196, 197, 199, 203, 208 and 210 each cross one straight step read as a
     half turn (seed 196: 63 inliers, a 179-degree turn, the planar reading agreeing), which
     folds the path: dead reckoning puts the crossing's two visits 46-61 steps apart on paths
-    of 116-138, and stage 9 sends the loop to the queue. A loop has two voices about the path between its ends, each its own
-    stage's test: where it comes back (stage 9: ``closure_slack + closure_rate`` per step)
-    and how it is turned (stage 8, for the cycle of the loop and its path). A step is read
-    straight when an automatic loop across it passes both only with the step straight
-    (``straightened``: the tracks of ``straightened_tracks``), and no automatic loop across
-    it passes either only with the turn: a real turn on the spot (a reverse drive's U-turn)
-    is needed by every loop across it. One step per call, the one most loops ask for; the
+    of 116-138, and stage 9 sends the loop to the queue. A loop has two voices about the
+    path between its ends, each its own stage's test: where it comes back (stage 9:
+    ``closure_slack + closure_rate`` per step) and how it is turned (stage 8, for the cycle
+    of the loop and its path). A step is read straight when an automatic loop across it
+    passes both only with the step straight (``straightened``: the tracks of
+    ``straightened_tracks``), and no automatic loop across it passes either only with the
+    turn: a real turn on the spot (a reverse drive's U-turn) is needed by every loop across
+    it. One step per call, the one most loops ask for; the
     caller reads it straight and asks again. No new number: stages 8 and 9's tolerances.
     A false loop could turn a path to fit itself only by falling, once straightened, within
     stage 9's reach of its place and stage 8's of its heading, where no loop keeps the turn.

@@ -335,7 +335,8 @@ def _track_of(headings: np.ndarray) -> np.ndarray:
 def _second_lap_read_with_a_half_turn(loop_yaw: float):
     """A square block, ten steps a side, driven round twice (80 steps); node 5 is passed again
     at node 45, seen turned by ``loop_yaw``. The geometry read the straight step 22 as a half
-    turn. Returns the loop, its status, the headings as read, and the step read straight."""
+    turn. Returns the loop, its status, the headings as read, and {22: the track with step 22
+    read straight}."""
     from engine.loop_closure import read_straight
 
     read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
