@@ -443,6 +443,19 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     the path checks (stages 9, 8, 9b) sent all three back. Held-out seeds 79-84, mapped once:
     83 -> 87 of 105, no false loop. The same floor with the measured distance alone (share 0.6) met a false
     loop in the ninth round (42 inliers where a step shares 57).
+    So too where the two ends are one stretch of path: every node between them is a
+    temporal neighbour (``neighbor_node_num``) of one end or the other, so the loop spans
+    at most ``2 * neighbor_node_num + 1`` steps (a tight turn: the robot turns round and
+    passes within a step of where it was a few nodes before). The score guards against a
+    place that looks like another place elsewhere (the three false loops the lower floor
+    met in the fifth, seventh and ninth rounds joined views 6-20 m apart along corridors
+    and reverse drives), and between two ends of one stretch there is no elsewhere: the
+    path between them is one temporal neighbourhood of each end. At a tight turn the two
+    views face opposite ways, blurred by the turn, and score 2-3 (second family, seeds
+    204-205: nodes 6-7 apart, 0.74-0.85 m, measured 0.78-0.99 steps, sharing 0.75-0.9 of a
+    step) where a pass along the same stretch scores 4 or more. No new number; the paper's
+    temporal window. First family (0-4, 300-301): the same places and queue (it has few
+    tight turns).
     Where geometry is not known (descriptors from another program) a high score
     (``auto_z``) with strong support along the stretch (``auto_support``) instead.
     A candidate for review is any other match at ``candidate_z`` whose confidence (score,
@@ -466,7 +479,9 @@ def tiers(c: Matches, params: MapParams, share_steps: bool = True) -> np.ndarray
     no_geo = c.inliers < 0
     sup = np.nan_to_num(c.support, nan=-np.inf)
     both_close = measured_close & shares_a_step                     # count and measure agree
-    floor = np.where(both_close, params.candidate_z - GEOMETRY_MARGIN_Z, params.candidate_z)
+    one_stretch = c.b - c.a <= 2 * params.neighbor_node_num + 1     # no "elsewhere" between the ends
+    floor = np.where(both_close | (measured_close & one_stretch), params.candidate_z - GEOMETRY_MARGIN_Z,
+                     params.candidate_z)
     auto = ((geo_strong & ((c.score >= params.auto_geometry_z)
                            | (measured_close & (c.score >= floor))))
             | (no_geo & (c.score >= params.auto_z) & (sup >= params.auto_support)))

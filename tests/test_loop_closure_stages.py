@@ -91,6 +91,23 @@ def test_views_that_measure_within_a_step_and_share_a_full_step_need_only_the_ge
     assert tiers(c, P).tolist() == ["auto", "", "", ""]
 
 
+def test_a_tight_turns_return_measured_within_a_step_needs_only_the_geometry_floor():
+    # A robot turns round and passes within a step of where it was seven nodes before: the
+    # two views face opposite ways and score low, but every node between them is a temporal
+    # neighbour of one end, so no look-alike place can lie between them. The same evidence
+    # across a long stretch of path, a tight turn measured further than a step, or a score
+    # under the floor at which geometry is looked at, is not enough.
+    strong = P.auto_inliers * 3
+    low = P.candidate_z - GEOMETRY_MARGIN_Z / 2
+    tight = 2 * P.neighbor_node_num + 1
+    c = matches(a=[40, 100, 200, 300], b=[40 + tight, 200, 200 + tight, 300 + tight],
+                score=[low, low, low, P.candidate_z - GEOMETRY_MARGIN_Z - 0.1], inliers=[strong] * 4,
+                ratio=[0.8] * 4, step=[int(strong / (P.auto_measured_share + 0.1))] * 4,
+                confidence=[P.candidate_confidence + 10] * 4)
+    c.distance_steps = np.array([0.9, 0.9, 1.5, 0.9]) * P.auto_distance_steps
+    assert tiers(c, P).tolist() == ["auto", "", "", ""]
+
+
 def test_views_measured_further_apart_than_a_step_are_not_one_place_however_much_they_share():
     # An offset return 1.4 m to the side can share as many inliers as a step; where the
     # distance is measured, it decides.
