@@ -352,14 +352,14 @@ def _track_of(headings: np.ndarray) -> np.ndarray:
 def _second_lap_read_with_a_half_turn(loop_yaw: float):
     """A square block, ten steps a side, driven round twice (80 steps); node 5 is passed again
     at node 45, seen turned by ``loop_yaw``. The geometry read the straight step 22 as a half
-    turn. Returns the loop, its status, the headings as read, and {22: the track with step 22
-    read straight}."""
+    turn. Returns the loop, its status, the headings as read, and {(22,): the track with step
+    22 read straight}."""
     from engine.loop_closure import read_straight
 
     read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
     read[23:] += 180.0
     c = matches(a=[5], b=[45], score=[8], yaw=[loop_yaw])
-    return c, np.array(["auto"], dtype=object), read, {22: _track_of(read_straight(read, 22))}
+    return c, np.array(["auto"], dtype=object), read, {(22,): _track_of(read_straight(read, 22))}
 
 
 def test_a_crossing_whose_path_reads_a_straight_step_as_a_half_turn_reads_it_straight():
@@ -369,10 +369,10 @@ def test_a_crossing_whose_path_reads_a_straight_step_as_a_half_turn_reads_it_str
     # heading agrees.
     c, status, read, straightened = _second_lap_read_with_a_half_turn(loop_yaw=0.0)
     assert np.linalg.norm(_track_of(read)[45] - _track_of(read)[5]) > 10
-    assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) == 22
+    assert straight_for_a_loop(c, status, read, _track_of(read), straightened, P) == (22,)
     # A candidate is no voice, and without a half turn read there is nothing to read straight.
     assert straight_for_a_loop(c, np.array(["candidate"], dtype=object), read, _track_of(read), straightened, P) is None
-    assert straight_for_a_loop(c, status, read_straight(read, 22), straightened[22], {}, P) is None
+    assert straight_for_a_loop(c, status, read_straight(read, 22), straightened[(22,)], {}, P) is None
 
 
 def test_a_loop_turned_against_the_straightened_path_cannot_straighten_it():
@@ -396,7 +396,31 @@ def test_a_real_turn_on_the_spot_stays_when_loops_across_it_need_it():
     straight[110] = straight[30]
     c = matches(a=[20, 50, 80, 30], b=[180, 150, 120, 110], score=[8] * 4, yaw=[180.0, 180.0, 180.0, 0.0])
     status = np.array(["auto"] * 4, dtype=object)
-    assert straight_for_a_loop(c, status, headings, track, {100: straight}, P) is None
+    assert straight_for_a_loop(c, status, headings, track, {(100,): straight}, P) is None
     # Alone, the look-alike's two voices would read the turn straight: the others are the guard.
     c1 = matches(a=[30], b=[110], score=[8], yaw=[0.0])
-    assert straight_for_a_loop(c1, np.array(["auto"], dtype=object), headings, track, {100: straight}, P) == 100
+    assert straight_for_a_loop(c1, np.array(["auto"], dtype=object), headings, track, {(100,): straight}, P) == (100,)
+
+
+def test_two_straight_steps_read_as_half_turns_are_read_straight_together_for_the_loop_across_both():
+    from engine.loop_closure import read_straight, straight_for_a_loop
+
+    # The block's second lap with two straight steps read as half turns (22 and 35): the
+    # headings undo each other, but the positions between them are folded and the path does
+    # not come back. Read straight alone, either step turns the loop's heading half round;
+    # only both together let it come back and agree.
+    read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
+    read[23:] += 180.0
+    read[36:] += 180.0
+    c = matches(a=[5], b=[45], score=[8], yaw=[0.0])
+    status = np.array(["auto"], dtype=object)
+    options = {(22,): _track_of(read_straight(read, 22)), (35,): _track_of(read_straight(read, 35))}
+    assert np.linalg.norm(_track_of(read)[45] - _track_of(read)[5]) > 10
+    assert straight_for_a_loop(c, status, read, _track_of(read), options, P) is None
+    options[(22, 35)] = _track_of(read_straight(read, 22, 35))
+    assert straight_for_a_loop(c, status, read, _track_of(read), options, P) == (22, 35)
+    # A loop across only the first step that comes back as read (nodes 20 and 26, on one spot
+    # through the fold, views turned half round) does not come back with both read straight:
+    # it needs the turns, and they stay.
+    c2 = matches(a=[5, 20], b=[45, 26], score=[8, 8], yaw=[0.0, 180.0])
+    assert straight_for_a_loop(c2, np.array(["auto"] * 2, dtype=object), read, _track_of(read), options, P) is None
