@@ -899,10 +899,10 @@ def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.nd
     passes both only with the step straight (``options``: the tracks of
     ``straight_options``), and no automatic loop across it passes either only with the
     turn: a real turn on the spot (a reverse drive's U-turn) is needed by every loop across
-    it. One step per call, the one most loops ask for; the
-    caller reads it straight and asks again. No new number: stages 8 and 9's tolerances.
-    Two consecutive half-turn steps are also tried together, where no single step will do
-    (twenty-first round): two straight steps misread on the way undo each other's heading,
+    it. One reading per call, the one most loops ask for (a single step where as many ask
+    for it); the caller reads it straight and asks again. No new number: stages 8 and 9's
+    tolerances. Two consecutive half-turn steps are also tried together (twenty-first
+    round): two straight steps misread on the way undo each other's heading,
     so a loop across both agrees in heading only with both turns or with neither, but the
     positions between them are folded and the path does not come back (the second family's
     seed 232: a crossing's return 0.22 m apart, steps 82 and 116, closure 73 steps). The
@@ -1083,9 +1083,12 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     headings = path_headings(features, columns, node_rows, shifts, frame_width, cache)
     headings, overruled = half_turns(c, status, headings, params)     # 8a
     track, straightened = _tracks(features, node_rows, shifts, frame_width, headings, cache, overruled, params)
-    while (steps := straight_for_a_loop(c, status, headings, track, straight_options(
-            c, status, features, node_rows, shifts, frame_width, headings, track, straightened, cache, overruled,
-            params), params)) is not None:                                                          # 8b
+    while True:                                                                        # 8b
+        options = straight_options(c, status, features, node_rows, shifts, frame_width, headings, track,
+                                   straightened, cache, overruled, params)
+        steps = straight_for_a_loop(c, status, headings, track, options, params)
+        if steps is None:
+            break
         headings, overruled = read_straight(headings, *steps), np.append(overruled, steps).astype(np.int64)
         track, straightened = _tracks(features, node_rows, shifts, frame_width, headings, cache, overruled, params)
     c.closure = np.full(len(c), np.nan) if track is None else np.linalg.norm(track[c.b] - track[c.a], axis=1)
