@@ -824,6 +824,13 @@ def reckoning_tolerance(steps, params: MapParams):
     return params.closure_slack + params.closure_rate * steps
 
 
+def _comes_back(c: Matches, track: np.ndarray, params: MapParams) -> np.ndarray:
+    """Stage 9's test of every loop on ``track``: dead reckoning puts its two ends within
+    ``reckoning_tolerance`` of the steps between them (stages 8b and 9a weigh other readings
+    of the path with it)."""
+    return np.linalg.norm(track[c.b] - track[c.a], axis=1) <= reckoning_tolerance(c.b - c.a, params)
+
+
 def closure(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarray:
     """Stage 9: the path must come back: demote automatic loops whose path does not, and
     drop candidates whose path does not.
@@ -918,15 +925,14 @@ def straight_for_a_loop(c: Matches, status: np.ndarray, headings: Optional[np.nd
     if track is None or headings is None or not options:
         return None
     auto = status == "auto"
-    tol = reckoning_tolerance(c.b - c.a, params)
-    comes_back = np.linalg.norm(track[c.b] - track[c.a], axis=1) <= tol
+    comes_back = _comes_back(c, track, params)
     turned, comparable = _heading_agrees(c, headings, params)
     best, most = None, 0
     for steps, straight in sorted(options.items(), key=lambda kv: len(kv[0])):   # one step before two
         across = np.zeros(len(c), bool)
         for k in steps:
             across |= auto & (c.a <= k) & (k < c.b)
-        comes_back_straight = np.linalg.norm(straight[c.b] - straight[c.a], axis=1) <= tol
+        comes_back_straight = _comes_back(c, straight, params)
         agrees_straight, _ = _heading_agrees(c, read_straight(headings, *steps), params)
         asks = across & comes_back_straight & ~comes_back & agrees_straight
         needs = across & ((comes_back & ~comes_back_straight) | (comparable & turned & ~agrees_straight))
@@ -946,8 +952,7 @@ def straight_options(c: Matches, status: np.ndarray, features, node_rows: np.nda
     options = {(k,): t for k, t in straightened.items()}
     if track is None or len(straightened) < 2:
         return options
-    far = (status == "auto") & (np.linalg.norm(track[c.b] - track[c.a], axis=1)
-                                > reckoning_tolerance(c.b - c.a, params))
+    far = (status == "auto") & ~_comes_back(c, track, params)
     steps = sorted(straightened)
     for k1, k2 in zip(steps[:-1], steps[1:]):
         if (far & (c.a <= k1) & (k2 < c.b)).any():
@@ -983,8 +988,7 @@ def lone_turns(c: Matches, status: np.ndarray, straightened: Optional[dict[int, 
     auto = (status == "auto") & np.isfinite(c.closure)
     tol = reckoning_tolerance(c.b - c.a, params)
     for k, track in straightened.items():
-        without = np.linalg.norm(track[c.b] - track[c.a], axis=1)
-        needs = auto & (c.a <= k) & (k < c.b) & (c.closure <= tol) & (without > tol)
+        needs = auto & (c.a <= k) & (k < c.b) & (c.closure <= tol) & ~_comes_back(c, track, params)
         if needs.sum() < 2:
             out[needs] = "candidate"
     return out

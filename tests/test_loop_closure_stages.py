@@ -349,15 +349,23 @@ def _track_of(headings: np.ndarray) -> np.ndarray:
     return np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
 
 
+def _block_read_with_half_turns(*steps: int) -> np.ndarray:
+    """Headings of a square block, ten steps a side, driven round twice (80 steps), with each
+    of the straight ``steps`` read as a half turn."""
+    read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
+    for k in steps:
+        read[k + 1:] += 180.0
+    return read
+
+
 def _second_lap_read_with_a_half_turn(loop_yaw: float):
-    """A square block, ten steps a side, driven round twice (80 steps); node 5 is passed again
-    at node 45, seen turned by ``loop_yaw``. The geometry read the straight step 22 as a half
-    turn. Returns the loop, its status, the headings as read, and {(22,): the track with step
-    22 read straight}."""
+    """The block (``_block_read_with_half_turns``); node 5 is passed again at node 45, seen
+    turned by ``loop_yaw``. The geometry read the straight step 22 as a half turn. Returns
+    the loop, its status, the headings as read, and {(22,): the track with step 22 read
+    straight}."""
     from engine.loop_closure import read_straight
 
-    read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
-    read[23:] += 180.0
+    read = _block_read_with_half_turns(22)
     c = matches(a=[5], b=[45], score=[8], yaw=[loop_yaw])
     return c, np.array(["auto"], dtype=object), read, {(22,): _track_of(read_straight(read, 22))}
 
@@ -409,9 +417,7 @@ def test_two_straight_steps_read_as_half_turns_are_read_straight_together_for_th
     # headings undo each other, but the positions between them are folded and the path does
     # not come back. Read straight alone, either step turns the loop's heading half round;
     # only both together let it come back and agree.
-    read = np.append(np.repeat(np.arange(8) * 90.0, 10), 720.0)
-    read[23:] += 180.0
-    read[36:] += 180.0
+    read = _block_read_with_half_turns(22, 35)
     c = matches(a=[5], b=[45], score=[8], yaw=[0.0])
     status = np.array(["auto"], dtype=object)
     options = {(22,): _track_of(read_straight(read, 22)), (35,): _track_of(read_straight(read, 35))}
