@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from engine.loop_closure import GEOMETRY_MARGIN_Z, Matches, consistency, one_per_place, tiers
+from engine.loop_closure import GEOMETRY_MARGIN_Z, Matches, closed_places, consistency, one_per_place, tiers
 from engine.params import MapParams
 
 P = MapParams()
@@ -22,6 +22,19 @@ def test_one_loop_per_place_keeps_the_most_confident_of_a_cluster_and_separate_p
     c = matches(a=[10, 11, 12, 50], b=[80, 81, 82, 120], score=[4, 6, 5, 4])
     keep = one_per_place(c, radius=4)
     assert keep.tolist() == [False, True, False, True]
+
+
+def test_a_candidate_beside_an_automatic_loop_leaves_the_queue_and_one_at_another_place_stays():
+    # Stage 7b moved the loop of the place at (40, 120) two nodes along; the candidate it left
+    # beside it asks about a place the map has closed. The candidates at (40, 122 + radius + 1)
+    # (further along the other pass) and (90, 170) are other places.
+    r = P.place_radius
+    c = matches(a=[42, 40, 40, 90], b=[122, 120, 122 + r + 1, 170], score=[4.0] * 4)
+    status = np.array(["auto", "candidate", "candidate", "candidate"])
+    assert closed_places(c, status, P).tolist() == ["auto", "", "candidate", "candidate"]
+    # without an automatic loop there is nothing closed
+    status = np.array(["candidate"] * 4)
+    assert closed_places(c, status, P).tolist() == ["candidate"] * 4
 
 
 def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate():
