@@ -303,6 +303,7 @@ def _write_demo_recording(rec, out: Path) -> dict:
 
 def _add_sampling(p: argparse.ArgumentParser) -> None:
     from .descriptors import DEFAULT_DESCRIPTOR
+    from .descriptors.efficientnet import PHOTOMETRIC
 
     p.add_argument("--descriptor", default=DEFAULT_DESCRIPTOR, help="descriptor name (default: %(default)s)")
     p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
@@ -324,7 +325,7 @@ def _add_sampling(p: argparse.ArgumentParser) -> None:
     g.add_argument("--phases", type=int, help="effnet-vlad: pool the features of this many rolls of the panorama "
                    "within one feature stride (1, 2, 4, 8, 16; default 1): steadier under heading changes, "
                    "that many times the network's cost")
-    g.add_argument("--photometric", choices=("none", "standardise"),
+    g.add_argument("--photometric", choices=PHOTOMETRIC,
                    help="effnet-vlad: 'standardise' gives the network each frame with its colour channels at zero "
                    "mean and unit spread, so that exposure and white balance changes between visits count less "
                    "(default: what the method asks for, engine/params.py METHOD_DESCRIBE_OPTIONS: standardise "

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from . import limits
+from .descriptors import efficientnet as effnet   # the model declares its choices (numpy only, no torch)
 from .errors import InputError
 
 
@@ -228,11 +229,11 @@ _ANYLOC_COMMON = {
 ALLOWED_OPTIONS: dict[str, dict] = {
     "effnet-vlad": {
         "input_height": _INPUT_HEIGHT, "batch_size": _BATCH, "device": _device,
-        "vocabulary_size": _int(1, 1024), "stage": _str_choice(("block7", "block10")),
-        "layout": _str_choice(("global", "sectors")), "sectors": _int(2, 16),
+        "vocabulary_size": _int(1, 1024), "stage": _str_choice(tuple(effnet.STAGES)),
+        "layout": _str_choice(effnet.LAYOUTS), "sectors": _int(2, 16),
         "seed": _int(0, limits.MAX_SEED), "threads": _int(1, 1024),
         "phases": _int(1, 16),   # the model names the allowed values (1, 2, 4, 8, 16)
-        "photometric": _str_choice(("none", "standardise")),
+        "photometric": _str_choice(effnet.PHOTOMETRIC),
     },
     "anyloc-vlad": {**_ANYLOC_COMMON, "vocabulary": _vocabulary, "num_clusters": _int(1, 1024)},
     "anyloc-gem": {**_ANYLOC_COMMON, "gem_p": lambda v, n: number(v, n, above=0.0, hi=100.0)},
