@@ -1059,11 +1059,11 @@ def closed_places(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarr
     Stage 4 keeps one match per place (no two kept matches within ``place_radius`` on both
     ends), but stage 7b then moves a match up to half that radius, or to a pair stage 4 set
     aside, so an automatic loop can come to lie beside a candidate of its own place. Such a
-    candidate asks a person about a place the map has closed already, through a pair
-    further apart (the automatic loop is the closest pair the geometry found). No new
-    number: stage 4's radius. First family (seeds 0-4): 16 of the queue's 74 entries lie
-    there, none of them a same-place pair (no place reached only through the queue is lost). The
-    same on the second family's looked-at seeds 190-195 (15 of 301) and 238-240 (22 of 199)."""
+    candidate asks a person about a place the map has closed already. No new number: stage
+    4's radius. First family (seeds 0-4): 16 of the queue's 74 entries lie there, none of
+    them a same-place pair, so no place reached only through the queue is lost (queue 74 ->
+    58). The same on the second family's looked-at seeds 190-195 (15 of 301) and 238-240 (22
+    of 199); over seeds 157-249 no place found with the queue was lost."""
     auto = np.flatnonzero(status == "auto")
     queue = np.flatnonzero(status == "candidate")
     if auto.size == 0 or queue.size == 0:
