@@ -199,6 +199,14 @@ def _descriptor_rank(c: Matches) -> np.ndarray:
     return c.score + np.maximum(np.nan_to_num(c.support, nan=0.0), 0.0)
 
 
+def _automatic_places(c: Matches, status: np.ndarray, radius: int) -> _PlaceGrid:
+    """The places closed by automatic loops: their pairs on a ``_PlaceGrid`` of ``radius``."""
+    closed = _PlaceGrid(radius)
+    for x, y in zip(c.a[status == "auto"].tolist(), c.b[status == "auto"].tolist()):
+        closed.add(x, y)
+    return closed
+
+
 def one_per_place(c: Matches, radius: int) -> np.ndarray:
     """Stage 4: keep a match only if no more confident match lies within ``radius`` nodes on
     both ends (ties go to the earlier pair). A stretch passed twice gives one loop every
@@ -561,9 +569,7 @@ def nearest(c: Matches, status: np.ndarray, set_aside: Matches, v: np.ndarray, s
     # A pair set aside may lie nearer another match's place than its owner's: a match does
     # not move to one within place_radius of an automatic loop (the most confident moves
     # first), so that a place closed already does not get a second loop through them.
-    closed = _PlaceGrid(params.place_radius)
-    for x, y in zip(c.a[status == "auto"].tolist(), c.b[status == "auto"].tolist()):
-        closed.add(x, y)
+    closed = _automatic_places(c, status, params.place_radius)
     for i in todo[np.lexsort((c.b[todo], c.a[todo], -c.confidence[todo]))]:
         mine = np.flatnonzero(close & (owner == i))
         mine = mine[np.argsort(n.distance_steps[mine], kind="stable")]
@@ -1073,9 +1079,7 @@ def closed_places(c: Matches, status: np.ndarray, params: MapParams) -> np.ndarr
     queue = np.flatnonzero(status == "candidate")
     if auto.size == 0 or queue.size == 0:
         return status
-    closed = _PlaceGrid(params.place_radius)
-    for x, y in zip(c.a[auto].tolist(), c.b[auto].tolist()):
-        closed.add(x, y)
+    closed = _automatic_places(c, status, params.place_radius)
     out = status.copy()
     for i in queue.tolist():
         if closed.near(int(c.a[i]), int(c.b[i])):

@@ -4,6 +4,7 @@ import numpy as np
 
 from engine.loop_closure import GEOMETRY_MARGIN_Z, Matches, closed_places, consistency, one_per_place, tiers
 from engine.params import MapParams
+from tests.sphere_views import fitted
 
 P = MapParams()
 
@@ -445,17 +446,6 @@ def test_two_straight_steps_read_as_half_turns_are_read_straight_together_for_th
     assert straight_for_a_loop(c2, np.array(["auto"] * 2, dtype=object), read, _track_of(read), options, P) is None
 
 
-def _seen(points: np.ndarray, centre_a: np.ndarray, centre_b: np.ndarray):
-    """The essential two-view model of cameras at ``centre_a``, ``centre_b`` (no turn) seeing
-    ``points``, as ``engine.sphere.two_view`` would fit it from perfect matches."""
-    from engine.sphere import TwoView, to_uv
-
-    uv_a, uv_b = to_uv(points - centre_a).astype(np.float32), to_uv(points - centre_b).astype(np.float32)
-    t = centre_a - centre_b
-    n = len(points)
-    return TwoView(n, n, 1.0, "essential", np.eye(3), 0.0, uv_a, uv_b, np.ones(n, bool), t / np.linalg.norm(t))
-
-
 def test_the_distance_between_two_visits_is_measured_in_node_steps_from_both_ends():
     # A reverse drive 0.5 m to the side of the first pass, nodes 1 m apart on both: nodes 0-2
     # go out, nodes 10-12 come back. No model knows a length; the loop (1, 11) measures half
@@ -465,7 +455,7 @@ def test_the_distance_between_two_visits_is_measured_in_node_steps_from_both_end
     room = np.random.default_rng(7).uniform([-4, -4, -1.2], [6, 4, 1.5], (200, 3))
     at = {0: (0, 0), 1: (1, 0), 2: (2, 0), 10: (2, 0.5), 11: (1, 0.5), 12: (0, 0.5)}
     at = {n: np.array([x, y, 0.0]) for n, (x, y) in at.items()}
-    cache = {"two_view": {(a, b): _seen(room, at[a], at[b])
+    cache = {"two_view": {(a, b): fitted(room, at[a], at[b])
                           for a, b in ((1, 11), (0, 1), (1, 2), (10, 11), (11, 12))}}
     d = _distance_steps(None, np.arange(13), np.array([1]), np.array([11]), cache)
     assert abs(d[0] - 0.5) < 0.02

@@ -7,6 +7,7 @@ import pytest
 from engine.features import FeatureTable, LocalFeatures, extract
 from engine.shift import apply_shift, canonical_shift, relative_yaw
 from engine.loop_closure import STILL_PARALLAX_DEG
+from tests.sphere_views import fitted
 from engine.sphere import (COMMON_POINTS_MIN, MODEL_CODES, TwoView, _decompose, baseline_ratio, bearings, motion_azimuth,
                            parallax, plane_share, to_uv,
                            two_view, verify_pairs, yaw_of_originals, yaw_of_rotation)
@@ -176,16 +177,6 @@ def test_a_flat_picture_is_all_on_one_plane_and_a_corridor_is_not():
     assert np.isnan(plane_share(r, np.zeros(3), *_two_views(corridor, r, np.zeros(3))))
 
 
-def _fitted(points: np.ndarray, centre_a: np.ndarray, centre_b: np.ndarray, model: str = "essential") -> TwoView:
-    """The two-view model of cameras at ``centre_a``, ``centre_b`` (no rotation) seeing ``points``."""
-    uv_a = to_uv(points - centre_a).astype(np.float32)
-    uv_b = to_uv(points - centre_b).astype(np.float32)
-    t = centre_a - centre_b                           # X_b = X_a + (centre_a - centre_b)
-    n = len(points)
-    return TwoView(n, n, 1.0, model, np.eye(3), 0.0, uv_a, uv_b, np.ones(n, bool),
-                   t / np.linalg.norm(t) if model == "essential" else None)
-
-
 def test_the_distance_between_two_visits_is_measured_in_steps_of_the_path():
     # A room seen from a node (the origin), from its next node one step (1.3 m) along the
     # path, and from a revisit 0.4 m to the side: the loop is 0.4 / 1.3 of a step long,
@@ -193,10 +184,10 @@ def test_the_distance_between_two_visits_is_measured_in_steps_of_the_path():
     rng = np.random.default_rng(5)
     room = rng.uniform([-5, -4, -1.2], [5, 4, 1.5], (150, 3))
     here, step_on, revisit = np.zeros(3), np.array([1.3, 0.0, 0.0]), np.array([0.1, 0.39, 0.0])
-    step = _fitted(room, here, step_on)
-    loop = _fitted(room, revisit, here)                 # the node is the loop's second view
+    step = fitted(room, here, step_on)
+    loop = fitted(room, revisit, here)                 # the node is the loop's second view
     assert baseline_ratio(loop, 1, step, 0) == pytest.approx(np.linalg.norm(revisit) / 1.3, rel=0.02)
-    far = _fitted(room, np.array([-3.0, 1.0, 0.0]), here)
+    far = fitted(room, np.array([-3.0, 1.0, 0.0]), here)
     assert baseline_ratio(far, 1, step, 0) == pytest.approx(np.hypot(3.0, 1.0) / 1.3, rel=0.02)
 
 
@@ -204,11 +195,11 @@ def test_no_distance_without_enough_points_seen_by_both_models_or_without_a_base
     rng = np.random.default_rng(6)
     room = rng.uniform([-5, -4, -1.2], [5, 4, 1.5], (150, 3))
     here, step_on, revisit = np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.5, 0.0])
-    step = _fitted(room, here, step_on)
-    few = _fitted(room[: COMMON_POINTS_MIN - 1], revisit, here)
+    step = fitted(room, here, step_on)
+    few = fitted(room[: COMMON_POINTS_MIN - 1], revisit, here)
     assert np.isnan(baseline_ratio(few, 1, step, 0))
     # a pure rotation is also what far-away content gives: it does not say "same spot"
-    turned = _fitted(room, revisit, here, model="rotation")
+    turned = fitted(room, revisit, here, model="rotation")
     assert np.isnan(baseline_ratio(turned, 1, step, 0))
 
 
