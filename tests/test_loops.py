@@ -128,7 +128,7 @@ def test_ours_blocks_give_same_answer_as_one_block(monkeypatch):
     rng = np.random.default_rng(9)
     v, _, _ = route_with_revisit(rng)
     whole = detect_loops(v, params(th=0.55))
-    monkeypatch.setattr(loops, "_BLOCK_ELEMENTS", 1)  # 16-row blocks
+    monkeypatch.setattr(loops.paper, "_BLOCK_ELEMENTS", 1)  # 16-row blocks
     assert detect_loops(v, params(th=0.55)) == whole
     assert whole
 

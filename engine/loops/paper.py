@@ -30,9 +30,9 @@ from typing import Optional
 
 import numpy as np
 
-from .errors import InputError
-from .params import METHODS, MapParams
-from .retrieval import pair_similarities
+from ..errors import InputError
+from ..params import METHODS, MapParams
+from ..retrieval import pair_similarities
 
 # Bound the similarity block (rows x m float32) to about 32 MB.
 _BLOCK_ELEMENTS = 8_000_000
@@ -64,7 +64,7 @@ def detect_loops(node_vectors: np.ndarray, params: MapParams) -> list[LoopCandid
     _check_params(params)
     if params.method == "verified":
         # Without the recording's column signatures: no yaw verification (see loops_verified).
-        from .loops_verified import verified_loops
+        from ..loops_verified import verified_loops
 
         return verified_loops(v, params)
     if params.method == "ours":
