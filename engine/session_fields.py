@@ -126,11 +126,66 @@ def check_describe(value: Any) -> dict:
     if "options" in d:
         from .descriptors import DEFAULT_DESCRIPTOR
 
-        out["options"] = validate.describe_options(
-            out.get("descriptor", DEFAULT_DESCRIPTOR), _mapping(d["options"], "describe.options"),
-            name=lambda key: f"session field 'describe.options.{key}'".replace(".'", "'"),
-            from_file=True)
+        out["options"] = file_options(out.get("descriptor", DEFAULT_DESCRIPTOR),
+                                      _mapping(d["options"], "describe.options"))
     return out
+
+
+# Options dropped from any file, for any descriptor: a download is the user's choice,
+# made again each time, never a file's. (Options that would run or write something are
+# in no allow-list, so a file naming one is refused.)
+NEVER_FROM_FILE = ("allow_download",)
+# What a file may set for a descriptor the allow-list (``engine.validate.ALLOWED_OPTIONS``)
+# has no table for (megaloc, boq: networks fixed by their weights): sizes, the device, the
+# precision and a weights file to READ (``torch.load(weights_only=True)``).
+_PRECISIONS = ("auto", "fp32", "fp16", "bf16")
+
+
+def _safe_generic(key: str, value: Any, name: str):
+    if key == "input_height":
+        from . import limits
+
+        return validate.integer(value, name, lo=limits.MIN_INPUT_HEIGHT, hi=limits.MAX_INPUT_HEIGHT)
+    if key == "batch_size":
+        from . import limits
+
+        return validate.integer(value, name, lo=1, hi=limits.MAX_BATCH_SIZE)
+    if key == "device":
+        if not isinstance(value, str) or value.strip().lower().partition(":")[0] not in ("auto", "cpu", "cuda", "mps"):
+            raise InputError(f"{name}: expected auto, cpu, cuda, cuda:N or mps, got {value!r}")
+        return value
+    if key == "precision":
+        if value not in _PRECISIONS:
+            raise InputError(f"{name}: expected one of {', '.join(_PRECISIONS)}, got {value!r}")
+        return value
+    if key == "weights":
+        return validate.readable_file(value, name)
+    raise InputError(f"{name}: not an option a session file may set "
+                     f"(allowed: batch_size, device, input_height, precision, weights)")
+
+
+def file_options(descriptor: str, options: dict) -> dict:
+    """The describe options of a session (or any file) for ``descriptor``, checked.
+
+    Whatever the descriptor, no option read from a file may download, execute or write
+    elsewhere: ``NEVER_FROM_FILE`` keys are dropped before anything else looks at them
+    (the allow-list of ``engine.validate`` returns early for descriptors it has no table
+    for, so the filter must not depend on it), and a descriptor with no table gets the
+    short safe list of ``_safe_generic``. Options for an unknown descriptor are refused."""
+    from .descriptors import REGISTRY
+
+    def name(key: str) -> str:
+        return f"session field 'describe.options.{key}'"
+
+    clean = {k: v for k, v in options.items() if k not in NEVER_FROM_FILE}
+    if descriptor not in REGISTRY:  # options nobody can check (the name itself is refused when used)
+        if clean:
+            raise _fail("describe.descriptor", f"one of {', '.join(sorted(REGISTRY))}", descriptor)
+        return {}
+    if descriptor in validate.ALLOWED_OPTIONS:
+        return validate.describe_options(descriptor, clean, name=lambda key: name(key).replace(".'", "'"),
+                                         from_file=True)
+    return {k: _safe_generic(k, v, name(k)) for k, v in clean.items() if v is not None}
 
 
 def check_params(value: Any) -> dict:

@@ -93,3 +93,33 @@ def test_a_good_session_keeps_its_fields(tmp_path):
     assert s.decisions == dec
     assert s.describe["options"] == {"input_height": 64}
     assert s.map_params().loop_sim_th == 0.6
+
+
+def _registry():
+    from engine.descriptors import REGISTRY
+
+    return sorted(REGISTRY)
+
+
+@pytest.mark.parametrize("descriptor", _registry())
+def test_no_descriptor_lets_a_file_turn_on_a_download(tmp_path, descriptor):
+    """Issue 43, defect 13: megaloc and boq returned their options before the filter."""
+    path = _write(tmp_path, describe={"descriptor": descriptor, "options": {"allow_download": True}})
+    assert "allow_download" not in Session.load(path).describe.get("options", {})
+
+
+@pytest.mark.parametrize("descriptor", _registry())
+@pytest.mark.parametrize("option", ["save_vocabulary", "trust_repo", "hub_url"])
+def test_no_descriptor_takes_an_option_that_would_write_or_run(tmp_path, descriptor, option):
+    victim = tmp_path / "precious.txt"
+    victim.write_text("keep me")
+    path = _write(tmp_path, describe={"descriptor": descriptor, "options": {option: str(victim)}})
+    with pytest.raises(InputError, match=option):
+        Session.load(path)
+    assert victim.read_text() == "keep me"
+
+
+def test_an_unknown_descriptor_in_a_file_is_named(tmp_path):
+    path = _write(tmp_path, describe={"descriptor": "fetch-from-the-web", "options": {"input_height": 64}})
+    with pytest.raises(InputError, match="describe.descriptor"):
+        Session.load(path)
