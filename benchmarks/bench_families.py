@@ -1,8 +1,12 @@
 """Loop closure on data we did not tune on: two synthetic world families and real panoramas.
 
-    python benchmarks/bench_families.py --family first  --seeds 0,1,2,3,4 --out first_tune.md
-    python benchmarks/bench_families.py --family second --seeds 0,1,2     --out second.md
-    python benchmarks/bench_families.py --family real                     --out real.md
+    python benchmarks/bench_families.py --family first  --seeds 0,1,2,3,4 --note tuning
+    python benchmarks/bench_families.py --family second --seeds 0,1,2     --note "held out"
+    python benchmarks/bench_families.py --family real
+
+The table (per route and in all, plus revisits by closeness and by span) goes to stdout; one
+row per method (the "all" totals) is appended to ``benchmarks/results/runs.csv`` through
+``runs.append_run``, with the date and the commit (``--no-record``: print only).
 
 The discipline (issue 13): every threshold of ``verified`` is chosen on the FIRST family
 (``engine.synth``) only, on its tuning seeds; the README reports the first family's held-out
@@ -48,7 +52,6 @@ from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
 from engine.run import run as run_map  # noqa: E402
 from engine.poses import Poses  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 DEFAULT_METHODS = ("verified", "verified-rules", "ours")
 EVAL_NN = 5
@@ -291,7 +294,9 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/panotopo-families", help="descriptor cache folder")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="override a map parameter (tuning on the first family only)")
-    ap.add_argument("--out", help="also write the table to benchmarks/results/NAME")
+    ap.add_argument("--note", default="", help="notes column of the rows appended to benchmarks/results/runs.csv")
+    ap.add_argument("--no-record", action="store_true", help="print the table only; append nothing to runs.csv")
+    ap.add_argument("--out", help=argparse.SUPPRESS)   # before runs.csv: a Markdown file; now read as --note
     ap.add_argument("--photometric", choices=PHOTOMETRIC_CHOICES,
                     help="effnet-vlad's photometric option for every method's descriptors "
                          "(default: what each method asks for)")
@@ -316,10 +321,25 @@ def main() -> None:
                  + "\n\nRevisits found automatically, by how many nodes the robot was away between the two visits:\n\n"
                  + "\n\n".join(by_span(rows, m) for m in methods))
     print(text)
-    if args.out:
-        RESULTS.mkdir(exist_ok=True)
-        cmd = "python benchmarks/bench_families.py " + " ".join(sys.argv[1:])
-        (RESULTS / args.out).write_text(f"`{cmd}`\n\n{text}\n")
+    if not args.no_record:
+        record(rows, methods, args.family, seeds, groups, params, " ".join(filter(None, (args.note, args.out))))
+
+
+def record(rows: list[Row], methods, family: str, seeds, groups, params: dict, note: str = "") -> None:
+    """One row per method (its totals over every recording) appended to runs.csv."""
+    from engine.benchmark import sum_rows
+    from runs import RUNS, append_run
+
+    for m in methods:
+        t = sum_rows(rows, m)
+        photometric = next(v for v, g in groups.items() if m in g)
+        extra = [f"photometric={photometric}"] + [f"{k}={v}" for k, v in sorted(params.items())]
+        append_run({"family": family, "seeds": "photos" if family == "real" else seeds, "method": m,
+                    "runs": t["runs"], "places": t["events_total"], "places_found": t["events_found"],
+                    "false_loops": t["fp"], "with_queue": t["events_with_candidates"],
+                    "queue": t["candidates"], "false_in_queue": t["false_candidates"],
+                    "notes": "; ".join(filter(None, (note, "bench_families.py " + " ".join(extra))))})
+    print(f"appended {len(methods)} row(s) to {RUNS}", file=sys.stderr)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Methods benchmark on synthetic routes: the paper's Table I methods and ``verified``.
 
     python benchmarks/bench_methods.py --mode paper   [--seeds 0]
-    python benchmarks/bench_methods.py --mode heldout [--tune-seeds 0,1,2 --test-seeds 3,4] [--out FILE.md]
+    python benchmarks/bench_methods.py --mode heldout [--tune-seeds 0,1,2 --test-seeds 3,4] [--note TEXT]
 
 ``paper``: one table like the paper's Tables II-V (TP, FP, TN, FN, precision, recall,
 accuracy, F1, revisit events per route and look) for simple, shift-simple and ours,
@@ -9,7 +9,9 @@ plus extraction speed (sampled frames per second, descriptor + panorama shift +
 column signatures). ``heldout``: the honest benchmark of the "beyond the paper"
 issue: every route type, both looks, people walking through (and lighting drift and
 noise on some seeds); the thresholds of ``verified`` were tuned on the tune seeds
-only, the table reports the test seeds. Tables go to benchmarks/results/.
+only, the table reports the test seeds. Tables go to stdout; ``paper`` also writes
+benchmarks/results/methods_paper.md, and ``heldout`` appends one row per seed set and
+method to benchmarks/results/runs.csv (``runs.append_run``; ``--no-record``: print only).
 
 Recordings are 256x128 at 1 frame per second (0.8 m apart), the descriptor runs at
 input height 128; descriptors are cached under --cache (default /tmp/panotopo-bench).
@@ -27,6 +29,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from engine.benchmark import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
                               markdown_table, sum_rows, summary_table)
@@ -137,14 +140,16 @@ def main() -> int:
     ap.add_argument("--test-seeds", default="3,4")
     ap.add_argument("--cache", default="/tmp/ptb")
     ap.add_argument("--input-height", type=int, default=128)
-    ap.add_argument("--out", default="", help="heldout mode: file name under benchmarks/results/")
+    ap.add_argument("--note", default="", help="heldout mode: notes column of the rows appended to runs.csv")
+    ap.add_argument("--no-record", action="store_true", help="heldout mode: print only, append nothing to runs.csv")
+    ap.add_argument("--out", default="", help=argparse.SUPPRESS)   # before runs.csv: a Markdown file; now a note
     args = ap.parse_args()
     RESULTS.mkdir(parents=True, exist_ok=True)
+    out = None
     cache = Path(args.cache)
 
     if args.mode == "speed":
         text = "## build_map time (best of 3)\n\n" + build_map_speed() + "\n"
-        out = RESULTS / "build_map_speed.md"
     elif args.mode == "paper":
         seeds = [int(s) for s in args.seeds.split(",")]
         rows = run(seeds, PAPER_METHODS, cache, args.input_height)
@@ -158,17 +163,33 @@ def main() -> int:
                 continue
             seeds = [int(s) for s in seeds.split(",")]
             rows = run(seeds, ALL_METHODS, cache, args.input_height)
+            if not args.no_record:
+                record(rows, seeds, " ".join(filter(None, (label, args.note, args.out))))
             parts.append(f"## {label} {seeds}\n\n" + summary_table(rows, ALL_METHODS, ROUTE_TYPES) + "\n\n<details><summary>"
                          "per route type and look</summary>\n\n" + look_table(rows, ALL_METHODS)
                          + "\n\n</details>\n\n<details><summary>per recording</summary>\n\n"
                          + markdown_table(rows) + "\n\n</details>\n")
         text = (f"Descriptor cache: {cache} (one descriptor and panorama-shift version per cache).\n\n"
                 + "\n".join(parts) + "\n" + speed_line(rows) + "\n")
-        out = RESULTS / (args.out or "methods_heldout.md")
-    out.write_text(text)
     print(text)
-    print(f"wrote {out}", file=sys.stderr)
+    if out is not None:
+        out.write_text(text)
+        print(f"wrote {out}", file=sys.stderr)
     return 0
+
+
+def record(rows: list[Row], seeds, note: str) -> None:
+    """One row per method (totals over the seeds' recordings) appended to runs.csv."""
+    from runs import append_run
+
+    for m in ALL_METHODS:
+        t = sum_rows(rows, m)
+        append_run({"family": "first", "seeds": seeds, "method": m, "runs": t["runs"],
+                    "places": t["events_total"], "places_found": t["events_found"], "false_loops": t["fp"],
+                    "with_queue": t["events_with_candidates"] if m == "verified" else "",
+                    "queue": t["candidates"] if m == "verified" else "",
+                    "false_in_queue": t["false_candidates"] if m == "verified" else "",
+                    "notes": "; ".join(filter(None, (note, "bench_methods.py --mode heldout")))})
 
 
 if __name__ == "__main__":

@@ -12,7 +12,7 @@ crossing and reverse routes at the same calibrated threshold (the harness of
 ``verified`` method (and ``ours``) on held-out seeds with that layout.
 Recordings are 256x128 at 1 frame/s like bench_methods.py; descriptors are cached under
 --cache with the layout in the file name (never mix caches of different versions).
-Results go to benchmarks/results/shift_<mode>.md.
+The table goes to stdout.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ from engine.pipeline import DescribeSettings, describe_frames  # noqa: E402
 from engine.shift import canonical_shift  # noqa: E402
 from engine.synth import make_recording  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
 # Disturbances per seed, as in bench_methods.py (seeds above 4 repeat seed % 5).
 DISTURBANCES = {0: {}, 1: {}, 2: {"people": 3, "noise": 0.01}, 3: {"people": 3},
                 4: {"people": 4, "lighting_drift": 0.3, "noise": 0.01}}
@@ -133,11 +132,7 @@ def main() -> int:
         rows = methods_rows(seeds, routes, methods, (True,), args.layout, args.input_height, cache)
         text = (f"## verified and ours, layout {args.layout}, input height {args.input_height}, seeds {seeds}\n\n"
                 + summary_table(rows, methods, routes))
-    RESULTS.mkdir(parents=True, exist_ok=True)
-    out = RESULTS / f"shift_{args.mode}_{args.layout}_h{args.input_height}.md" if args.mode != "agreement" \
-        else RESULTS / "shift_agreement.md"
-    out.write_text(text + "\n")
-    print(text)
+    print(text)   # stdout only: benchmarks/results/ keeps runs.csv (benchmarks/runs.py), not one file per run
     return 0
 
 
