@@ -46,6 +46,10 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
     if not path.exists():
         raise InputError(f"{path}: no such file or directory")
     suffix = path.suffix.lower()
+    if suffix == ".zstd" and Path(path.stem).suffix.lower() in (".db3", ".mcap"):
+        # ros2 bag record --compression-mode file: only the bag's metadata.yaml says so
+        raise InputError(f"{path}: a ROS2 storage file compressed whole; open the bag directory "
+                         f"with its metadata.yaml, or decompress it first with 'zstd -d {path}'")
     is_bag = is_ros2_bag_dir(path) if path.is_dir() else suffix in (".bag", ".db3", ".mcap")
     if is_bag:
         return BagSource(path, topic)

@@ -1,9 +1,13 @@
 """ROS1 .bag and ROS2 bags (directory, bare .db3, bare .mcap) as frame sources.
 
 Image topics are ``sensor_msgs/msg/Image`` (rgb8, bgr8, mono8, mono16, bayer_*,
-... anything rosbags-image converts) and ``sensor_msgs/msg/CompressedImage``.
+... anything rosbags-image converts; ``16UC1`` and ``8UC1`` are read as mono16 and
+mono8) and ``sensor_msgs/msg/CompressedImage``. Type names are matched in either
+spelling, ``sensor_msgs/Image`` (ROS1) or ``sensor_msgs/msg/Image`` (ROS2).
 Frames come out RGB uint8; grey images are repeated over three channels and
-16-bit images are scaled to 8 bit.
+16-bit images are scaled linearly from the full 16-bit range, value * 255 / 65535
+(so a 16UC1 depth image in millimetres up to 10 m comes out dark, at most 39).
+Which bags other tools write are read is said in ``bag_reader.py``.
 
 A frame's stamp is its header stamp (``sec + nanosec * 1e-9``, ROS time), or its
 log time when the header stamp is zero. Opening a bag reads every message of the
@@ -28,6 +32,7 @@ import numpy as np
 from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
 from ..validate import frame_size, image_file_size
+from .bag_reader import BagFormatError, BagReader, open_reader
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 POSE_TYPES = (
@@ -68,17 +73,16 @@ def _reader_path(path: Path) -> Path:
     return path
 
 
-def open_bag(path: Path) -> Any:
-    """An open ``rosbags.highlevel.AnyReader``; InputError when the bag is unreadable."""
-    from rosbags.highlevel import AnyReader
-
+def open_bag(path: Path) -> BagReader:
+    """An open ``bag_reader.BagReader``; InputError when the bag is unreadable."""
     target = _reader_path(Path(path))
     if target.is_file() and target.suffix not in (".bag",) + ROS2_STORAGE_SUFFIXES:
         raise InputError(f"{path}: not a ROS bag (expected .bag, .db3, .mcap or a bag directory)")
     try:
-        reader = AnyReader([target])
-        reader.open()
-    except Exception as err:  # rosbags raises many types for corrupt files
+        reader = open_reader(target)
+    except BagFormatError as err:
+        raise InputError(f"{path}: {err}") from None
+    except Exception as err:  # rosbags and mcap raise many types for corrupt files
         raise InputError(f"{path}: unreadable ROS bag ({_one_line(err)}); {recovery_hint(Path(path))}") from None
     return reader
 
@@ -174,12 +178,22 @@ def message_to_rgb(msg: Any, msgtype: str) -> np.ndarray:
             if img.shape[2] == 4:
                 return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
             return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        rgb = message_to_cvimage(unpadded(msg), "rgb8")
+        rgb = message_to_cvimage(unpadded(as_named_encoding(msg)), "rgb8")
         return np.ascontiguousarray(rgb, dtype=np.uint8)
     except AssertionError:  # rosbags-image asserts on undecodable compressed data
         raise ValueError("not a decodable JPEG/PNG image") from None
     except (ImageError, cv2.error, TypeError) as err:
         raise ValueError(_one_line(err)) from None
+
+
+# OpenCV-style single-channel encodings that mean the same pixels as a named grey one.
+GREY_ALIASES = {"16UC1": "mono16", "8UC1": "mono8"}
+
+
+def as_named_encoding(msg: Any) -> Any:
+    """``msg`` with a 16UC1 / 8UC1 encoding renamed mono16 / mono8 (same bytes, same scaling)."""
+    alias = GREY_ALIASES.get(str(msg.encoding))
+    return msg if alias is None else dataclasses.replace(msg, encoding=alias)
 
 
 def unpadded(msg: Any) -> Any:
@@ -337,5 +351,5 @@ class BagSource(IndexedSource):
 
     def close(self) -> None:
         with self._lock:
-            if self._reader is not None and self._reader.stack is not None:
+            if self._reader is not None:
                 self._reader.close()
