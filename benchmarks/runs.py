@@ -14,9 +14,13 @@ A benchmark that measures places found on a family of recordings calls ``append_
   (candidates left for a person) and ``false_in_queue`` (of them, not the same place);
 - ``notes``: free text (what was different about the run: a parameter, a branch, "held out").
 
-Rows dated up to 2026-11-28 were read from the Markdown tables that used to live in
+Rows dated up to 2026-11-27 were read from the Markdown tables that used to live in
 ``benchmarks/results/`` (each note names its file and line; read one with
-``git show <commit>:benchmarks/results/<file>``) and from the README's results table.
+``git show b45dfff:benchmarks/results/<file>``) and from the README's results table (its
+commit: the one that brought the row into the README). Their ``commit`` is the one that added
+the file, or the code commit the file names for that table. Rows before 2026-11-25 named
+``verified`` were the first round's rule-based method, which is ``verified-rules`` today: they
+are listed under that name.
 
     from runs import append_run            # benchmarks/ on sys.path, as the benchmarks have it
     append_run({"family": "second", "seeds": "250-255", "method": "verified", "runs": 42,
