@@ -82,28 +82,41 @@ def _describe_settings(args: argparse.Namespace, shift: bool):
     from .validate import describe_options
 
     options = describe_options(args.descriptor, _descriptor_options(args), name=_argument_name)
+    keyframes = args.interval == KEYFRAMES
     return DescribeSettings(
-        descriptor=args.descriptor, interval=args.interval, topic=args.topic,
+        descriptor=args.descriptor, interval=1.0 if keyframes else args.interval, topic=args.topic,
         shift=shift, options=options, skip_bad_frames=args.skip_bad_frames,
+        projection=getattr(args, "projection", None), sampling="keyframes" if keyframes else "interval",
     )
 
 
 def _report_skipped(args: argparse.Namespace, descs) -> None:
+    for note in descs.meta.get("reader_notes") or []:   # e.g. a video cut short, read as far as it goes
+        print(f"panotopo: {note}", file=sys.stderr)
     skipped = descs.meta.get("skipped_frames") or []
     if skipped:
         print(f"panotopo: skipped {len(skipped)} undecodable frame(s) of {args.input} "
               f"(first: {skipped[0]})", file=sys.stderr)
 
 
-def _describe(args: argparse.Namespace):
-    """``describe`` as ``--method`` asks (as ``map`` would describe), unshifted under ``--no-shift``."""
+def _describe_command_settings(args: argparse.Namespace):
+    """The settings of ``describe``: as ``--method`` asks (as ``map`` would describe), unshifted
+    under ``--no-shift`` (the single form and the batch form alike)."""
     from dataclasses import replace
 
-    from .pipeline import describe, method_settings
+    from .pipeline import method_settings
 
     settings = method_settings(MapParams(method=args.method), _describe_settings(args, True))
     if args.no_shift:
         settings = replace(settings, shift=False)
+    return settings
+
+
+def _describe(args: argparse.Namespace):
+    """``describe`` of the one INPUT with ``_describe_command_settings``."""
+    from .pipeline import describe
+
+    settings = _describe_command_settings(args)
     bar = _Bar(args.quiet)
     try:
         descs = describe(args.input, settings, progress=bar, cache=_cache(args))
@@ -136,7 +149,11 @@ def _check_arguments(args: argparse.Namespace) -> None:
     from . import limits, validate
     from .outputs import check_output
 
-    if getattr(args, "interval", None) is not None:
+    if args.command == "describe":
+        from .batch import check_form
+
+        check_form(args)   # -o OUT.npz (one INPUT) or --out-dir DIR (a batch); sets args.input
+    if getattr(args, "interval", None) not in (None, KEYFRAMES):
         validate.interval(args.interval)
     if getattr(args, "method", None) is not None:
         validate.map_params(_map_params(args), name=_argument_name)
@@ -170,6 +187,11 @@ def _say(args: argparse.Namespace, text: str) -> None:
 # ----------------------------------------------------------------------------- commands
 
 def cmd_describe(args: argparse.Namespace) -> int:
+    if args.out_dir is not None:   # a batch on Dask (engine/batch.py, docs/cluster.md)
+        from .batch import run_command
+
+        return run_command(args, _describe_command_settings(args), say=lambda text: _say(args, text),
+                           warn=lambda text: print(f"panotopo: {text}", file=sys.stderr))
     descs = _describe(args)
     descs.save(args.output)
     _say(args, f"wrote {args.output}: {len(descs)} descriptors of dimension {descs.vectors.shape[1]}")
@@ -301,13 +323,33 @@ def _write_demo_recording(rec, out: Path) -> dict:
 
 # ----------------------------------------------------------------------------- parser
 
+KEYFRAMES = "keyframes"
+
+
+def _interval_argument(text: str):
+    """``--interval``: seconds (float), or ``keyframes``."""
+    if str(text).strip().lower() == KEYFRAMES:
+        return KEYFRAMES
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds or 'keyframes', got {text!r}") from None
+
+
 def _add_sampling(p: argparse.ArgumentParser) -> None:
     from .descriptors import DEFAULT_DESCRIPTOR
     from .descriptors.efficientnet import PHOTOMETRIC
 
     p.add_argument("--descriptor", default=DEFAULT_DESCRIPTOR, help="descriptor name (default: %(default)s)")
-    p.add_argument("--interval", type=float, default=1.0, help="sampling interval in seconds (default: 1.0)")
+    p.add_argument("--interval", type=_interval_argument, default=1.0, metavar="SECONDS|keyframes",
+                   help="sampling interval in seconds (default: 1.0), or 'keyframes': a video's key frames "
+                        "only (fastest; stamps as far from regular as the key frames are)")
     p.add_argument("--topic", help="image topic of a ROS bag (needed when it has several)")
+    p.add_argument("--projection", metavar="NAME[:fov=D,roll=A/B]",
+                   help="what the frames are when the file cannot say: equirect, dual-fisheye (two fisheyes "
+                        "side by side, or one per video stream; fov = lens field of view in degrees, roll = "
+                        "turn of each lens image) or eac (equi-angular cubemap); default: read from the "
+                        "file (.insv, GoPro .360), else equirect")
     g = p.add_argument_group("descriptor options")
     g.add_argument("--weights", help="checkpoint file (AnyLoc: dinov2_vit*14*_pretrain.pth; megaloc: model.safetensors "
                    "or megaloc.torch; boq: dinov2_12288.pth)")
@@ -377,8 +419,15 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.set_defaults(func=cmd_map)
 
     p = sub.add_parser("describe", parents=[common], help="compute descriptors and save them as .npz")
-    p.add_argument("input")
-    p.add_argument("-o", "--output", required=True, help="output .npz")
+    p.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="a recording (with -o), or several described as one batch (with --out-dir)")
+    p.add_argument("-o", "--output", help="output .npz (one INPUT)")
+    p.add_argument("--out-dir", help="describe every INPUT as one batch on Dask into DIR/<input file name>.npz; "
+                   "finished files are kept, a rerun describes only what is missing (docs/cluster.md)")
+    p.add_argument("--scheduler", help="with --out-dir: address of a running Dask scheduler "
+                   "(tcp://host:8786; default: a local cluster)")
+    p.add_argument("--workers", type=int, help="with --out-dir: workers of the local cluster "
+                   "(default: one per GPU, else one per CPU core)")
     p.add_argument("--method", default=MapParams().method, choices=METHODS,
                    help="describe as this loop detection method asks (its panorama shift and describe "
                         "options; default: %(default)s), so that 'map' of the .npz with that method "
