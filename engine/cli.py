@@ -166,11 +166,13 @@ def _check_arguments(args: argparse.Namespace) -> None:
             validate.integer(args.input_height, "--input-height", lo=limits.MIN_INPUT_HEIGHT,
                              hi=limits.MAX_INPUT_HEIGHT)
     inputs = [getattr(args, k, None) for k in ("input", "map", "poses")]
-    for key in ("output", "plot"):
-        if getattr(args, key, None):
+    for key in ("output", "plot", "json"):
+        if getattr(args, key, None) and isinstance(getattr(args, key), str):
             check_output(getattr(args, key), inputs)
     if getattr(args, "output", None) and getattr(args, "plot", None):
         check_output(args.plot, [args.output])
+    if getattr(args, "json", None) and isinstance(args.json, str):
+        check_output(args.json, [args.output, getattr(args, "plot", None)])
 
 
 def _load_poses(path: str, topic: Optional[str]):
@@ -214,10 +216,15 @@ def cmd_map(args: argparse.Namespace) -> int:
     for line in out.warnings:
         print(f"warning: {line}", file=sys.stderr)
     topomap = out.topomap
-    topomap.write_graphml(args.output, keep_candidates=args.keep_candidates)
+    from .exports import write_map, write_node_link_json
+
+    write_map(topomap, args.output, keep_candidates=args.keep_candidates)   # .json: node-link JSON
     loops = topomap.loops()
     _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
+    if getattr(args, "json", None):
+        write_node_link_json(topomap, args.json, keep_candidates=args.keep_candidates)
+        _say(args, f"wrote {args.json} (networkx node-link JSON)")
     if args.plot:
         from .plots import plot_map
         plot_map(topomap, out.poses, out.evaluation, args.plot)
@@ -394,7 +401,9 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
 
     p = sub.add_parser("map", parents=[common], help="build a topological map (GraphML) from a recording")
     p.add_argument("input", help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz")
-    p.add_argument("-o", "--output", required=True, help="output .graphml")
+    p.add_argument("-o", "--output", required=True,
+                   help="output map: .graphml, or .json for networkx node-link JSON (engine/exports.py)")
+    p.add_argument("--json", metavar="PATH", help="also write the map as networkx node-link JSON")
     p.add_argument("--method", default=MapParams().method, choices=METHODS,
                    help="loop detection method (default: %(default)s; 'ours' is the paper's)")
     _add_sampling(p)
