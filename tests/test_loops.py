@@ -153,3 +153,54 @@ def test_bad_parameters_and_tiny_inputs():
     with pytest.raises(InputError):
         detect_loops(v, params(w=0))
     assert isinstance(LoopCandidate(0, 2, 0.5, 3), LoopCandidate)
+
+
+@pytest.mark.parametrize("w,c,nn", [(5, 2, 3), (3, 0, 0), (20, 3, 2), (17, 16, 1), (2, 1, 30)])
+@pytest.mark.parametrize("seed", range(3))
+def test_ours_small_tiles_equal_reference(monkeypatch, w, c, nn, seed):
+    """Tiles of 16 nodes (windows and neighbourhoods reaching across several tiles, the
+    transposed half of each tile) give the plain loops' answer."""
+    import engine.loops as loops
+
+    monkeypatch.setattr(loops.paper, "_BLOCK_ELEMENTS", 1)
+    assert loops.paper._tile_side() == 16
+    rng = np.random.default_rng(seed * 1000 + w * 10 + c)
+    m = int(rng.integers(40, 90))
+    v = unit(rng.normal(size=(m, 3)))
+    th = float(rng.uniform(0.0, 0.7))
+    got = detect_loops(v, params(th=th, w=w, c=c, nn=nn))
+    assert {(l.a, l.b): l.window_count for l in got} == reference_ours(v, th, w, c, nn)
+
+
+def test_ours_reports_progress_per_tile_and_can_be_cancelled(monkeypatch):
+    import threading
+
+    import engine.loops as loops
+    from engine.errors import Cancelled
+
+    monkeypatch.setattr(loops.paper, "_BLOCK_ELEMENTS", 1)  # 16-node tiles
+    v, _, _ = route_with_revisit(np.random.default_rng(2))
+    calls = []
+    whole = detect_loops(v, params(th=0.55), progress=lambda *a: calls.append(a))
+    assert {stage for _, _, stage in calls} == {loops.paper.OURS_STAGE}
+    done = [d for d, _, _ in calls]
+    total = calls[-1][1]
+    assert done == sorted(done) and done[0] == 0 and done[-1] == total > 1
+    # The same through the context the command line sets; the answer does not change.
+    seen = []
+    with loops.paper.loop_progress(lambda *a: seen.append(a)):
+        assert detect_loops(v, params(th=0.55)) == whole
+    assert seen == calls
+    stop = threading.Event()
+    stop.set()
+    with pytest.raises(Cancelled):
+        detect_loops(v, params(th=0.55), cancel=stop)
+
+
+def test_simple_reports_progress():
+    import engine.loops as loops
+
+    v = unit(np.random.default_rng(4).normal(size=(30, 4)))
+    calls = []
+    detect_loops(v, params(method="simple", th=0.5), progress=lambda *a: calls.append(a))
+    assert calls[-1] == (30, 30, loops.paper.SIMPLE_STAGE)
