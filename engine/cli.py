@@ -30,7 +30,12 @@ class _Parser(argparse.ArgumentParser):
 
 
 class _Bar:
-    """A tqdm progress bar on stderr fed by the engine's (done, total, stage) callback."""
+    """A tqdm progress bar on stderr fed by the engine's (done, total, stage) callback.
+
+    The unit is the stage's (``engine.loops.paper.PROGRESS_UNITS``: tiles or nodes of the
+    loop search), frames otherwise; a stage of unknown size (total 0) shows only its name
+    and the time spent, never a count of "0frame"; a bar is drawn when it starts and
+    redrawn only when its count changes (a new bar is not drawn twice)."""
 
     def __init__(self, quiet: bool):
         self.quiet = quiet
@@ -42,14 +47,20 @@ class _Bar:
             return
         from tqdm import tqdm
 
-        if self.bar is None or stage != self.stage:
+        from .loops.paper import PROGRESS_UNITS
+
+        if self.bar is None or stage != self.stage or (total and self.bar.total is None):
             self.close()
-            self.bar = tqdm(total=total or None, desc=stage, unit="frame", file=sys.stderr, leave=False)
+            plain = {} if total else {"bar_format": "{desc} [{elapsed}]"}
+            self.bar = tqdm(total=total or None, desc=stage, unit=PROGRESS_UNITS.get(stage, "frame"),
+                            initial=done, file=sys.stderr, leave=False, **plain)
             self.stage = stage
+            return
         if total and self.bar.total != total:
             self.bar.total = total
-        self.bar.n = done
-        self.bar.refresh()
+        if done != self.bar.n:
+            self.bar.n = done
+            self.bar.refresh()
 
     def close(self) -> None:
         if self.bar is not None:
@@ -205,11 +216,14 @@ def cmd_map(args: argparse.Namespace) -> int:
 
     params = _map_params(args)
     poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
+    from .loops.paper import loop_progress
+
     bar = _Bar(args.quiet)
     try:
-        out = run(args.input, params, settings=_describe_settings(args, params.uses_shift), poses=poses,
-                  recording_poses=poses is None, auto_thresholds=args.auto_thresholds,
-                  evaluate=bool(args.plot), progress=bar, cache=_cache(args), poses_name=str(args.poses))
+        with loop_progress(bar):  # the loop search's progress (engine.run does not pass it down)
+            out = run(args.input, params, settings=_describe_settings(args, params.uses_shift), poses=poses,
+                      recording_poses=poses is None, auto_thresholds=args.auto_thresholds,
+                      evaluate=bool(args.plot), progress=bar, cache=_cache(args), poses_name=str(args.poses))
     finally:
         bar.close()
     _report_skipped(args, out.descs)

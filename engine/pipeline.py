@@ -29,6 +29,8 @@ class DescribeSettings:
     shift: bool = True
     options: dict = field(default_factory=dict)  # passed to the descriptor model
     skip_bad_frames: bool = False  # skip undecodable frames (listed in meta "skipped_frames")
+    projection: Optional[str] = None  # --projection (engine.sources.projection); None: what the file says
+    sampling: str = "interval"     # "interval": every ``interval`` s; "keyframes": a video's key frames only
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -107,17 +109,24 @@ def describe(
     from .validate import interval as check_interval
 
     check_interval(settings.interval, "interval")
+    if settings.sampling not in ("interval", "keyframes"):
+        raise InputError(f"sampling: expected 'interval' or 'keyframes', got {settings.sampling!r}")
     model = descriptor_registry.get(settings.descriptor, **settings.options)
     key = None
     if cache is not None:
-        key = cache_key(path, {"interval": settings.interval, "topic": settings.topic},
+        reading = {"interval": settings.interval, "topic": settings.topic}
+        if settings.projection or settings.sampling != "interval":   # keys of earlier runs unchanged
+            reading.update(projection=settings.projection, sampling=settings.sampling)
+        key = cache_key(path, reading,
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
                          "features": FEATURES_VERSION, "work_width": work_width(model), **model.settings()})
         hit = cache.load(key)
         if hit is not None:
             return hit
 
-    with open_source(path, topic=settings.topic, interval=settings.interval) as source:
+    with open_source(path, topic=settings.topic, interval=settings.interval, projection=settings.projection,
+                     keyframes_only=settings.sampling == "keyframes",
+                     skip_bad_frames=settings.skip_bad_frames) as source:
         result = describe_source(source, settings, model, str(path), progress, cancel)
     if cache is not None and key is not None:
         cache.store(key, result)
@@ -145,6 +154,12 @@ def describe_source(source: FrameSource, settings: DescribeSettings, model, wher
     finally:
         frames.close()   # on cancel or error too: reading stops before the caller closes the source
     result.meta["skipped_frames"] = skipped
+    projection = getattr(source, "projection", None)
+    result.meta["projection"] = projection.as_meta() if projection is not None else {"name": "equirect"}
+    result.meta["sampling"] = settings.sampling
+    notes = list(getattr(source, "notes", None) or [])
+    if notes:
+        result.meta["reader_notes"] = notes
     return result
 
 

@@ -47,6 +47,7 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
     from .progress import check
 
     warnings: list[str] = []
+    positions = "ground truth"   # graph attribute: what positioned the nodes
     if isinstance(source, Descriptors):                                            # 1
         descs, name = source, str(source.meta.get("source", ""))
     else:
@@ -68,12 +69,23 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
 
         poses, found_warnings = own_poses(Path(source), interval=settings.interval)
         warnings.extend(found_warnings)
+        if poses is not None:   # EXIF or GPMF fixes: a track that misses the nodes is a warning
+            from .errors import InputError
+            from .validate import poses_cover
+
+            positions = "gps"
+            try:
+                poses_cover(poses, topomap.stamps(), "the recording's own GPS")
+            except InputError as err:
+                warnings.append(f"no node positions: {err}")
+                poses = None
     if poses is not None:
         from .validate import poses_cover
 
         poses_cover(poses, topomap.stamps(), poses_name)
         x, y = poses.at(topomap.stamps())
         topomap.set_positions(x, y)
+        topomap.graph.graph["positions"] = topomap.meta["positions"] = positions
     evaluation = None
     if evaluate and poses is not None:                                             # 5
         from .evaluate import evaluate as score

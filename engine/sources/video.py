@@ -38,7 +38,8 @@ from .video_av import DECODE_THREADS, AvSampler, AvUnavailable
 os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 VIDEO_SUFFIXES = (".mp4", ".avi", ".mkv", ".mov", ".m4v", ".webm", ".mpg", ".mpeg",
-                  ".wmv", ".flv", ".ts", ".mts", ".3gp", ".ogv")
+                  ".wmv", ".flv", ".ts", ".mts", ".3gp", ".ogv",
+                  ".insv", ".360")  # Insta360 and GoPro MAX: MP4 inside (engine/sources/video_360.py)
 
 # Forward gaps up to this many frames are grabbed through; larger ones seek
 # (a seek decodes from the previous key frame, so small gaps are cheaper to walk).
@@ -58,12 +59,19 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
 class VideoSource(FrameSource):
     """A video file; random access for the GUI and a single pass for sampling."""
 
-    def __init__(self, path: str | Path, use_pyav: bool = True, keyframes: bool = True) -> None:
+    def __init__(self, path: str | Path, use_pyav: bool = True, keyframes: bool = True,
+                 keyframes_only: bool = False, allow_truncated: bool = False) -> None:
         """``use_pyav=False`` forces the OpenCV reader; ``keyframes=False`` makes the
-        PyAV sampler deliver the exact frames (``engine.frames.sample_indices``)."""
+        PyAV sampler deliver the exact frames (``engine.frames.sample_indices``);
+        ``keyframes_only``: ``frames`` delivers every key frame, whatever the interval
+        (``--interval keyframes``; needs PyAV); ``allow_truncated``: a file cut short is read
+        as far as it goes, with a note in ``notes`` (``--skip-bad-frames``)."""
         self.path = Path(path)
         self._use_pyav = use_pyav
         self._keyframes = keyframes
+        self._keyframes_only = keyframes_only
+        self._allow_truncated = allow_truncated
+        self.notes: list[str] = []
         self._sampler: Optional[AvSampler] = None
         if not self.path.is_file():
             raise InputError(f"{self.path}: no such file")
@@ -100,9 +108,21 @@ class VideoSource(FrameSource):
         """The PyAV sampler, made on first use; None when PyAV cannot read this file."""
         if self._use_pyav and self._sampler is None:
             try:
-                self._sampler = AvSampler(self.path, use_keyframes=self._keyframes)
-            except AvUnavailable:
+                self._sampler = AvSampler(self.path, use_keyframes=self._keyframes,
+                                          keyframes_only=self._keyframes_only,
+                                          allow_truncated=self._allow_truncated)
+            except AvUnavailable as err:
+                if self._keyframes_only:
+                    raise InputError(f"{self.path}: sampling at key frames needs PyAV to read this "
+                                     f"video ({err}); use a sampling interval in seconds") from None
                 self._use_pyav = False
+            else:
+                if self._sampler.missing:
+                    self.notes.append(f"{self.path}: video is truncated or damaged: "
+                                      f"{len(self._sampler.index)} of the {self._sampler.index.declared} "
+                                      f"frames it declares can be read; read those")
+        if self._keyframes_only and not self._use_pyav:
+            raise InputError(f"{self.path}: sampling at key frames needs PyAV; use a sampling interval in seconds")
         return self._sampler if self._use_pyav else None
 
     @property

@@ -77,6 +77,12 @@ class StreamIndex:
     key: np.ndarray         # bool, presentation order: the frame is a key frame
     decode_pos: np.ndarray  # int64, presentation order: the packet's position in decode order
     fps: float
+    declared: int = 0       # frames the container declares (0: it does not say)
+
+    @property
+    def missing(self) -> int:
+        """Declared frames the demuxer could not read (a cut-off or damaged file)."""
+        return max(0, self.declared - len(self))
 
     def __len__(self) -> int:
         return int(self.stamps.size)
@@ -135,12 +141,14 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(text).split()) or type(err).__name__
 
 
-def read_index(path: Path) -> StreamIndex:
-    """Demux ``path`` once (no decoding): pts, key flags and decode order of every frame.
+def read_index(path: Path, stream: int = 0) -> StreamIndex:
+    """Demux ``path`` once (no decoding): pts, key flags and decode order of every frame of
+    its video stream number ``stream`` (0: the first).
 
     Raises AvUnavailable when PyAV is missing, cannot open the container, or the
     stream has no usable presentation times (the OpenCV reader handles those), and
-    InputError when the file is broken part way.
+    InputError when the file is broken part way. A file that ends before the frames it
+    declares is indexed as far as it goes (``StreamIndex.missing``; the sampler decides).
     """
     if av is None:
         raise AvUnavailable("PyAV is not installed")
@@ -149,9 +157,9 @@ def read_index(path: Path) -> StreamIndex:
     except (av.error.FFmpegError, OSError) as err:
         raise AvUnavailable(_one_line(err)) from None
     try:
-        if not container.streams.video:
-            raise AvUnavailable("no video stream")
-        stream = container.streams.video[0]
+        if len(container.streams.video) <= stream:
+            raise AvUnavailable("no video stream" if stream == 0 else f"no video stream {stream}")
+        stream = container.streams.video[stream]
         pts: list[int] = []
         key: list[bool] = []
         try:
@@ -171,9 +179,6 @@ def read_index(path: Path) -> StreamIndex:
         container.close()
     if not pts:
         raise InputError(f"{path}: video has no frames")
-    if declared > len(pts):  # the demuxer stops quietly at the end of a cut-off file
-        raise InputError(f"{path}: video is truncated or damaged: {len(pts)} of the "
-                         f"{declared} frames it declares can be read")
     if time_base is None:
         raise AvUnavailable("no time base")
     dec_pts = np.asarray(pts, dtype=np.int64)
@@ -183,19 +188,55 @@ def read_index(path: Path) -> StreamIndex:
         raise AvUnavailable("repeated presentation times")
     stamps = (pres_pts - pres_pts[0]).astype(np.float64) * float(time_base)
     return StreamIndex(stamps=stamps, pts=pres_pts, key=np.asarray(key, bool)[order],
-                       decode_pos=order.astype(np.int64), fps=fps)
+                       decode_pos=order.astype(np.int64), fps=fps, declared=declared)
+
+
+def truncation_message(path: Path, index: StreamIndex) -> str:
+    return (f"{path}: video is truncated or damaged: {len(index)} of the {index.declared} frames "
+            f"it declares can be read")
 
 
 class AvSampler:
-    """Sampled frames of one video, decoding only what the samples need."""
+    """Sampled frames of one video, decoding only what the samples need.
 
-    def __init__(self, path: str | Path, use_keyframes: bool = True) -> None:
+    ``projection`` (``engine.sources.projection.Projection``, None = equirectangular): frames
+    of another projection are converted to equirectangular as they are decoded, from one
+    video stream or two (GoPro .360, two-stream .insv: their frames are paired by position
+    in presentation order, and a frame counts as a key frame only where both streams have
+    one). ``keyframes_only``: ``frames`` delivers every key frame and nothing else
+    (``--interval keyframes``). ``allow_truncated``: a file that ends before the frames it
+    declares is read as far as it goes (``missing`` tells how many are lost) instead of
+    refused (``--skip-bad-frames``).
+    """
+
+    def __init__(self, path: str | Path, use_keyframes: bool = True, projection=None,
+                 keyframes_only: bool = False, allow_truncated: bool = False) -> None:
         self.path = Path(path)
         self.use_keyframes = use_keyframes
-        self.index = read_index(self.path)
+        self.keyframes_only = keyframes_only
+        self.projection = projection if projection is not None and projection.converts else None
+        streams = self.projection.streams if self.projection is not None else 1
+        indexes = [read_index(self.path, k) for k in range(streams)]
+        self.missing = max(ix.missing for ix in indexes)
+        if self.missing and not allow_truncated:
+            raise InputError(truncation_message(self.path, max(indexes, key=lambda ix: ix.missing)))
+        self.indexes = _paired(self.path, indexes)
+        self.index = self.indexes[0]
+        self.shapes = _stream_shapes(self.path, streams)
         self.last_stats = SampleStats()
 
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) of the delivered panoramas at full size."""
+        if self.projection is None:
+            return self.shapes[0]
+        from .projection import native_size
+
+        return native_size(self.projection, self.shapes)
+
     def plan(self, interval: float) -> SamplePlan:
+        if self.keyframes_only:
+            return SamplePlan(np.flatnonzero(self.index.key).astype(np.int64), "all-keyframes")
         return plan_samples(self.index, interval, self.use_keyframes)
 
     def _runs(self, picks: np.ndarray) -> list[tuple[int, int, list[int]]]:
@@ -221,6 +262,18 @@ class AvSampler:
             run[2].append(int(i))
         return [tuple(r) for _, r in sorted(runs.items())]
 
+    def frame_at(self, index: int, max_width: Optional[int] = None) -> Frame:
+        """Frame ``index`` (presentation order), decoded from its key frame (random access)."""
+        if not 0 <= index < len(self.index):
+            raise IndexError(f"frame {index} outside 0..{len(self.index) - 1}")
+        decoders = _Decoders(self.path, self.indexes, max_width, self.projection, self.shapes)
+        try:
+            done = decoders.decode(self._runs(np.asarray([index]))[0])
+        finally:
+            decoders.close()
+        (i, (rgb, source_width)), = done.frames
+        return Frame(i, float(self.index.stamps[i]), rgb, source_width)
+
     def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
         """Frames sampled every ``interval`` seconds (see module doc), in order.
 
@@ -238,7 +291,7 @@ class AvSampler:
         self.last_stats = stats
         if plan.indices.size == 0:
             return
-        decoders = _Decoders(self.path, self.index, max_width)
+        decoders = _Decoders(self.path, self.indexes, max_width, self.projection, self.shapes)
         pending: deque = deque()
         pool = ThreadPoolExecutor(max_workers=DECODE_THREADS, thread_name_prefix="panotopo-decode")
         try:
@@ -264,6 +317,29 @@ class AvSampler:
             yield Frame(i, float(self.index.stamps[i]), rgb, source_width)
 
 
+def _paired(path: Path, indexes: list[StreamIndex]) -> list[StreamIndex]:
+    """The streams' indexes as one: frame i of every stream belongs to panorama i; cut to the
+    shortest stream (a camera stopped mid-frame), key only where every stream has a key frame."""
+    if len(indexes) == 1:
+        return indexes
+    n = min(len(ix) for ix in indexes)
+    first = indexes[0]
+    if n < 0.99 * max(len(ix) for ix in indexes) - 1:
+        raise InputError(f"{path}: its two video streams have {len(first)} and {len(indexes[1])} frames; "
+                         f"the halves of a 360 picture must come in pairs")
+    key = np.logical_and.reduce([ix.key[:n] for ix in indexes])
+    if not key.any():
+        raise InputError(f"{path}: its video streams have no key frame in common")
+    # presentation positions >= n are dropped; decode positions stay those of the file
+    return [StreamIndex(stamps=first.stamps[:n], pts=ix.pts[:n], key=key, decode_pos=ix.decode_pos[:n],
+                        fps=first.fps, declared=ix.declared) for ix in indexes]
+
+
+def _stream_shapes(path: Path, streams: int) -> list[tuple[int, int]]:
+    with av.open(str(path)) as container:
+        return [(int(s.codec_context.width), int(s.codec_context.height)) for s in container.streams.video[:streams]]
+
+
 # Threads that decode runs at once. A run after a seek starts at a key frame, and FFmpeg
 # decodes one H.264/HEVC key frame on one thread (frame threads need a sequence of frames,
 # camera streams have one slice per frame), so at 1 Hz on key frames one thread was the
@@ -286,11 +362,17 @@ class _DecodedRun:
 
 
 class _Decoders:
-    """One container (and packet reader) per decoding thread, closed together at the end."""
+    """One container (and packet reader) per decoding thread, closed together at the end;
+    with a projection, one converter per thread too."""
 
-    def __init__(self, path: Path, index: StreamIndex, max_width: Optional[int]) -> None:
-        self.path, self.index, self.max_width = path, index, max_width
-        self.order = _DecodeOrder(index)   # read-only, shared by the threads' packet readers
+    def __init__(self, path: Path, indexes, max_width: Optional[int], projection=None,
+                 shapes=None) -> None:
+        if isinstance(indexes, StreamIndex):
+            indexes = [indexes]
+        self.path, self.indexes, self.max_width = path, list(indexes), max_width
+        self.index = self.indexes[0]
+        self.projection, self.shapes = projection, shapes
+        self.orders = [_DecodeOrder(ix) for ix in self.indexes]   # read-only, shared by the threads
         self._local = threading.local()
         self._opened: list = []
         self._lock = threading.Lock()
@@ -304,38 +386,60 @@ class _Decoders:
                 raise InputError(f"{self.path}: cannot open the video ({_one_line(err)})") from None
             with self._lock:
                 self._opened.append(container)
-            stream = container.streams.video[0]
-            stream.codec_context.thread_type = "AUTO"
-            reader = self._local.reader = _PacketReader(container, stream, self.order)
+            streams = list(container.streams.video[:len(self.indexes)])
+            for stream in streams:
+                stream.codec_context.thread_type = "AUTO"
+            reader = self._local.reader = _PacketReader(container, streams, self.orders)
         return reader
+
+    def _converter(self):
+        conv = getattr(self._local, "converter", None)
+        if conv is None:
+            from .projection import Converter
+
+            conv = self._local.converter = Converter(self.projection, self.shapes, self.max_width)
+        return conv
 
     def decode(self, run: tuple[int, int, list[int]]) -> _DecodedRun:
         """Decode one run (in a worker thread): its picks as RGB, checked, in pick order."""
         first, last, picks = run
         packets = self._reader()
-        codec = packets.stream.codec_context
-        wanted = {int(self.index.pts[i]): i for i in picks}
-        got: dict[int, tuple[np.ndarray, int]] = {}
+        codecs = [stream.codec_context for stream in packets.streams]
+        wanted = [{int(ix.pts[i]): i for i in picks} for ix in self.indexes]
+        got: list[dict] = [{} for _ in codecs]
         decoded, seeks_before = 0, packets.seeks
         try:
-            for packet in packets.run(first, last):
-                decoded += 1
-                self._keep(codec.decode(packet), wanted, got)
-            self._keep(codec.decode(None), wanted, got)
-            codec.flush_buffers()
+            for k, packet in packets.run(first, last):
+                decoded += k == 0
+                self._keep(k, codecs[k].decode(packet), wanted[k], got[k])
+            for k, codec in enumerate(codecs):
+                self._keep(k, codec.decode(None), wanted[k], got[k])
+                codec.flush_buffers()
         except av.error.FFmpegError as err:
             raise InputError(f"{self.path}: video is damaged ({_one_line(err)})") from None
         for i in picks:
-            if i not in got:
+            if any(i not in g for g in got):
                 raise InputError(f"{self.path}: frame {i} cannot be decoded")
-        return _DecodedRun(first, last, [(i, got[i]) for i in picks], decoded, packets.seeks - seeks_before)
+        if self.projection is None:
+            frames = [(i, got[0][i]) for i in picks]
+        else:
+            conv = self._converter()
+            frames = []
+            for i in picks:
+                rgb = conv([g.pop(i) for g in got])
+                frames.append((i, (rgb, conv.native[0] if rgb.shape[1] < conv.native[0] else 0)))
+        return _DecodedRun(first, last, frames, decoded, packets.seeks - seeks_before)
 
-    def _keep(self, frames, wanted: dict[int, int], got: dict) -> None:
-        """RGB of the wanted decoded ``frames`` (checked 2:1 at full size), shrunk past ``max_width``."""
+    def _keep(self, k: int, frames, wanted: dict[int, int], got: dict) -> None:
+        """RGB of the wanted decoded ``frames`` of stream ``k``: equirectangular ones checked 2:1
+        at full size and shrunk past ``max_width``; others at full size for the converter."""
         max_width = self.max_width
         for frame in frames:
             i = wanted.get(frame.pts)
             if i is None:
+                continue
+            if self.projection is not None:
+                got[i] = frame.to_ndarray(format="rgb24")
                 continue
             w, h = int(frame.width), int(frame.height)
             check_equirectangular_size(w, h, f"{self.path}: frame {i}")
@@ -354,56 +458,70 @@ class _Decoders:
 
 
 class _DecodeOrder:
-    """The index in decode order: each decode position's pts and each pts's decode position."""
+    """One stream's index in decode order: each decode position's pts (-1 where the paired
+    index dropped the frame) and each pts's decode position."""
 
     def __init__(self, index: StreamIndex) -> None:
-        self.dec_pts = np.empty(len(index), dtype=np.int64)
+        size = int(index.decode_pos.max()) + 1 if len(index) else 0
+        self.dec_pts = np.full(size, -1, dtype=np.int64)
         self.dec_pts[index.decode_pos] = index.pts
-        self.pos_of = {int(p): d for d, p in enumerate(self.dec_pts)}
+        self.pos_of = {int(p): d for d, p in enumerate(self.dec_pts) if p >= 0}
 
 
 class _PacketReader:
-    """Packets of decode positions first..last, seeking forward over what is not needed."""
+    """Packets (stream slot, packet) of decode positions first..last of every stream, seeking
+    forward over what is not needed. Streams are positioned by the first one; with several
+    streams a run reads on until every stream has passed ``last``, so the next run seeks."""
 
-    def __init__(self, container, stream, order: _DecodeOrder) -> None:
-        self.container, self.stream = container, stream
+    def __init__(self, container, streams, orders: list) -> None:
+        self.container, self.streams = container, list(streams)
+        self.stream = self.streams[0]
         self.seeks = 0
-        self.dec_pts, self.pos_of = order.dec_pts, order.pos_of
+        self.orders = orders
+        self.slot = {s.index: k for k, s in enumerate(self.streams)}
         self.demux = None
-        self.next_pos = 0  # decode position of the next packet self.demux yields
+        self.next_pos = 0  # decode position (first stream) of the next packet self.demux yields
 
     def _restart(self, first: int) -> None:
         """Seek to the key frame at decode position ``first`` (read from the start when it is 0)."""
         if self.demux is not None or first > 0:  # a fresh reader's first run need not be the video's
             self.seeks += 1
-            target = int(self.dec_pts[first])
+            target = int(self.orders[0].dec_pts[first])
             self.container.seek(target, stream=self.stream, backward=True, any_frame=False)
-        self.demux = self.container.demux(self.stream)
+        self.demux = self.container.demux(*self.streams)
         self.next_pos = -1  # unknown until the first packet
 
     def run(self, first: int, last: int) -> Iterator:
         if self.demux is None or self.next_pos != first:
             self._restart(first)
         retried = False
-        while True:
+        started = [False] * len(self.streams)
+        done = [False] * len(self.streams)
+        while not all(done):
             packet = next(self.demux, None)
             if packet is None:
                 return
             if packet.size == 0 or packet.pts is None:
                 continue
-            pos = self.pos_of.get(int(packet.pts))
-            if pos is None:
+            k = self.slot.get(packet.stream.index)
+            if k is None or done[k]:
                 continue
-            if pos < first:
+            pos = self.orders[k].pos_of.get(int(packet.pts))
+            if pos is None or pos < first:
                 continue
-            if pos > first and self.next_pos == -1:
+            if pos > first and not started[k]:
                 if retried:  # seek landed past the key frame twice: give up on this run
                     return
                 retried = True
                 self.container.seek(0, stream=self.stream, backward=True, any_frame=False)
-                self.demux = self.container.demux(self.stream)
+                self.demux = self.container.demux(*self.streams)
+                started = [False] * len(self.streams)
                 continue
-            self.next_pos = pos + 1
-            yield packet
+            started[k] = True
+            if k == 0:
+                self.next_pos = pos + 1
+            yield k, packet
             if pos >= last:
-                return
+                done[k] = True
+        if len(self.streams) > 1:
+            self.next_pos = -1  # the other streams read past the run: seek next time

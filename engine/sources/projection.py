@@ -1,0 +1,321 @@
+"""What a 360 camera's frames are, and their conversion to equirectangular panoramas.
+
+Projections (``Projection.name``):
+
+- ``equirect``: a 2:1 equirectangular panorama (what the engine works on; no conversion).
+- ``dual-fisheye``: two circular fisheye images of back-to-back lenses, side by side in one
+  frame (Insta360 One/One X ``.insv``, ROS dual-fisheye drivers) or one per video stream
+  (``layout="two-streams"``: newer ``.insv``); the lens field of view ``fov`` (degrees) and a
+  roll of each lens image about its optical axis (``roll``, degrees, counter-clockwise) are
+  options. The lens order and orientation are FFmpeg's ``dfisheye``: the left image is one
+  lens, the right one the other, both upright; ``roll=A/B`` says the file has the left image
+  turned A degrees and the right one B degrees counter-clockwise (e.g. ``roll=0/180`` for a
+  back lens recorded upside down), and the conversion turns them back.
+- ``eac``: an equi-angular cubemap. ``layout="gopro"`` is the GoPro MAX ``.360`` layout: two
+  video streams of three faces each (stream 0: left, front, right; stream 1: down, back, up,
+  rotated as in FFmpeg's ``eac``), the left/right and down/up faces ``extra`` columns wider
+  than square (4096 x 1344 at 5.6K: faces 1376, 1344, 1376 wide) because the two lenses'
+  pictures overlap there: each such face holds its first half from one lens and its second
+  half from the other, ``extra`` columns of the sphere twice around its middle. The
+  conversion keeps each lens up to the face's centre line (no blending) and drops the copy.
+  ``layout="eac"`` is a plain 3 x 2 EAC frame (FFmpeg's, YouTube's).
+
+``Converter`` does the geometry with FFmpeg's ``v360`` filter (bundled with PyAV) on RGB
+frames: the layout is assembled in numpy (hstack of two streams, GoPro overlap columns
+dropped, lens rolls), then one ``v360`` pass to equirectangular, then area averaging to the
+width asked for. A converter holds one filter graph: one per thread.
+
+``parse_projection`` reads the ``--projection`` option: ``NAME[:key=value,...]`` with keys
+``fov`` (dual-fisheye lens field of view), ``roll`` (``A/B``, the two lens rolls) and
+``layout``; ``detect_projection`` reads what a video file says about itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from fractions import Fraction
+from pathlib import Path
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..errors import InputError
+
+NAMES = ("equirect", "dual-fisheye", "eac")
+LAYOUTS = {"equirect": ("single",), "dual-fisheye": ("side-by-side", "two-streams"), "eac": ("eac", "gopro")}
+
+# Lens field of view used when the file does not say: Insta360 One X/X2/X3 lenses cover about
+# 200 degrees (the figure commonly given to FFmpeg's dfisheye for .insv); other dual-fisheye
+# cameras (Ricoh Theta, ROS drivers of two 190-degree lenses) about 190.
+DEFAULT_FOV = {"insta360": 200.0, "generic": 190.0}
+MIN_FOV, MAX_FOV = 180.0, 250.0   # a pair of lenses must cover the sphere; more is not a fisheye
+# Shape of one GoPro .360 stream: three faces side by side, 4096 x 1344 (5.6K) or 2272 x 736.
+GOPRO_ASPECT = (2.9, 3.2)
+
+
+@dataclass(frozen=True)
+class Projection:
+    """How a recording's frames map the sphere (module doc)."""
+
+    name: str = "equirect"
+    layout: str = ""                   # "" = the name's first layout
+    fov: float = 0.0                   # dual-fisheye: lens field of view, degrees (0 = the camera's default)
+    roll: tuple = (0.0, 0.0)           # dual-fisheye: roll of each lens image, degrees
+    extra: int = 0                     # eac/gopro: columns each side face is wider than square
+    source: str = "default"            # where it came from: "option", "container", "default"
+
+    def __post_init__(self) -> None:
+        if self.name not in NAMES:
+            raise InputError(f"--projection: unknown projection {self.name!r}; expected one of {', '.join(NAMES)}")
+        if not self.layout:
+            object.__setattr__(self, "layout", LAYOUTS[self.name][0])
+        if self.layout not in LAYOUTS[self.name]:
+            raise InputError(f"--projection: {self.name} has no layout {self.layout!r}; expected one of "
+                             f"{', '.join(LAYOUTS[self.name])}")
+        if self.name == "dual-fisheye" and self.fov:
+            if not MIN_FOV <= self.fov <= MAX_FOV:
+                raise InputError(f"--projection: fisheye field of view must be {MIN_FOV:g}-{MAX_FOV:g} degrees, "
+                                 f"got {self.fov:g}")
+        object.__setattr__(self, "roll", tuple(float(r) for r in self.roll))
+
+    @property
+    def converts(self) -> bool:
+        return self.name != "equirect"
+
+    @property
+    def streams(self) -> int:
+        """Video streams the frames come from."""
+        return 2 if self.layout in ("two-streams", "gopro") else 1
+
+    def as_meta(self) -> dict:
+        """What the descriptors' meta records."""
+        d = asdict(self)
+        d["roll"] = list(self.roll)
+        return d
+
+
+def parse_projection(text: Optional[str]) -> Optional[Projection]:
+    """``--projection NAME[:key=value,...]`` (module doc); None for None or ''."""
+    if not text:
+        return None
+    name, _, rest = str(text).strip().partition(":")
+    fields: dict = {"name": name.strip().lower(), "source": "option"}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        key, eq, value = item.partition("=")
+        key = key.strip().lower()
+        if not eq:
+            raise InputError(f"--projection: {item!r} is not key=value (e.g. dual-fisheye:fov=200)")
+        try:
+            if key == "fov":
+                fields["fov"] = float(value)
+            elif key == "roll":
+                parts = [float(v) for v in value.split("/")]
+                if len(parts) != 2:
+                    raise ValueError
+                fields["roll"] = tuple(parts)
+            elif key == "layout":
+                fields["layout"] = value.strip().lower()
+            else:
+                raise InputError(f"--projection: unknown key {key!r} (fov, roll, layout)")
+        except ValueError:
+            raise InputError(f"--projection: bad value in {item!r} (fov=DEGREES, roll=A/B, layout=NAME)") from None
+    if not all(np.isfinite(v) for v in (fields.get("fov", 0.0), *fields.get("roll", ()))):
+        raise InputError("--projection: values must be finite numbers")
+    return Projection(**fields)
+
+
+# --------------------------------------------------------------------------- detection
+
+@dataclass(frozen=True)
+class StreamShape:
+    width: int
+    height: int
+    handler: str = ""
+
+
+def projection_from_streams(shapes: Sequence[StreamShape], suffix: str,
+                            given: Optional[Projection] = None) -> Projection:
+    """The projection of a video with these video streams (in order) and file suffix.
+
+    Rules (what cameras write): two video streams of equal size about 3:1 -> GoPro EAC;
+    two square streams -> dual fisheye, one lens per stream; ``.insv`` with one 2:1 stream ->
+    dual fisheye side by side; else equirectangular. A ``given`` projection (the option) wins
+    over the file, but keeps the stream layout the file has where the option names none.
+    """
+    video = [s for s in shapes if s.width > 0 and s.height > 0]
+    insta = suffix.lower() == ".insv"
+    two_equal = len(video) >= 2 and (video[0].width, video[0].height) == (video[1].width, video[1].height)
+    gopro = two_equal and GOPRO_ASPECT[0] <= video[0].width / video[0].height <= GOPRO_ASPECT[1]
+    squares = two_equal and video[0].width == video[0].height
+    if given is not None and given.source == "option":
+        if given.name == "dual-fisheye" and squares and given.layout == "side-by-side":
+            given = replace(given, layout="two-streams")
+        if given.name == "eac" and gopro:
+            given = replace(given, layout="gopro")
+        if given.name == "dual-fisheye" and not given.fov:
+            given = replace(given, fov=DEFAULT_FOV["insta360" if insta else "generic"])
+        return _with_extra(given, video)
+    if gopro:
+        return _with_extra(Projection("eac", "gopro", source="container"), video)
+    if squares:
+        fov = DEFAULT_FOV["insta360" if insta else "generic"]
+        return Projection("dual-fisheye", "two-streams", fov=fov, source="container")
+    if insta and video and video[0].width == 2 * video[0].height:
+        return Projection("dual-fisheye", "side-by-side", fov=DEFAULT_FOV["insta360"], source="container")
+    return Projection("equirect", source="default")
+
+
+def _with_extra(p: Projection, video: Sequence[StreamShape]) -> Projection:
+    """GoPro layout: the overlap columns from the stream shape (width = 3 h + 2 extra)."""
+    if p.layout != "gopro":
+        return p
+    if len(video) < 2:
+        raise InputError("the GoPro EAC layout needs two video streams")
+    w, h = video[0].width, video[0].height
+    extra = (w - 3 * h) // 2
+    if extra < 0 or (w - 3 * h) % 2 or extra % 2 or extra >= h // 2:
+        raise InputError(f"video streams of {w}x{h} are not GoPro EAC strips (3 faces of {h} plus overlap)")
+    return replace(p, extra=int(extra))
+
+
+def detect_projection(path: Path, given: Optional[Projection] = None) -> Projection:
+    """``projection_from_streams`` for the file at ``path`` (read with PyAV). A file PyAV
+    cannot open is equirectangular as far as this goes (the video reader then says what is
+    wrong) unless ``given`` asks for a conversion, which needs PyAV: then InputError."""
+    try:
+        import av
+        import av.error
+    except ImportError:
+        if given is not None and given.converts:
+            raise InputError(f"{path}: converting {given.name} video needs PyAV (pip install av)") from None
+        return given or Projection()
+    try:
+        with av.open(str(path)) as container:
+            shapes = [StreamShape(int(s.codec_context.width or 0), int(s.codec_context.height or 0),
+                                  str(s.metadata.get("handler_name", "")).strip())
+                      for s in container.streams.video]
+    except (av.error.FFmpegError, OSError) as err:
+        if given is not None and given.converts:
+            raise InputError(f"{path}: unreadable or unsupported video container "
+                             f"({getattr(err, 'strerror', None) or err})") from None
+        return given or Projection()
+    return projection_from_streams(shapes, Path(path).suffix, given)
+
+
+# --------------------------------------------------------------------------- geometry
+
+def native_size(p: Projection, shapes: Sequence[tuple[int, int]]) -> tuple[int, int]:
+    """(width, height) of the equirectangular panorama at the input's own resolution:
+    dual fisheye as wide as both lens images together, EAC four faces wide."""
+    w, h = shapes[0]
+    if p.name == "dual-fisheye":
+        width = 2 * w if p.layout == "two-streams" else w
+    elif p.name == "eac":
+        face = h if p.layout == "gopro" else h // 2
+        width = 4 * face
+    else:
+        width = w
+    width -= width % 2
+    return width, width // 2
+
+
+def gopro_columns(width: int, height: int, extra: int) -> np.ndarray:
+    """Columns of one GoPro .360 stream that make its 3 square faces (module doc): each side
+    face keeps columns [0, f/2) and [f/2 + extra, f + extra) of its ``f + extra`` stored ones."""
+    f = height
+    side = f + extra
+    if 2 * side + f != width:
+        raise InputError(f"video stream of {width}x{height} is not a GoPro EAC strip with {extra} overlap columns")
+    half = f // 2
+    face_cols = np.concatenate([np.arange(half), np.arange(half + extra, side)])
+    return np.concatenate([face_cols, side + np.arange(f), side + f + face_cols]).astype(np.intp)
+
+
+class Converter:
+    """Frames of projection ``p`` (one RGB array per stream) -> equirectangular RGB.
+
+    ``out_width``: width of the panorama delivered (2:1); None = the native size. ``v360``
+    renders at most twice that width, then area averaging brings it down (a bilinear
+    remap straight to a much smaller size would alias). Not thread-safe: one per thread.
+    """
+
+    def __init__(self, p: Projection, shapes: Sequence[tuple[int, int]], out_width: Optional[int] = None) -> None:
+        if not p.converts:
+            raise ValueError("equirectangular frames need no conversion")
+        self.p = p
+        self.shapes = [tuple(int(v) for v in s) for s in shapes]
+        if len(self.shapes) != p.streams:
+            raise InputError(f"{p.name} ({p.layout}) needs {p.streams} video stream(s), got {len(self.shapes)}")
+        self.native = native_size(p, self.shapes)
+        self.out_width = min(self.native[0], int(out_width)) if out_width else self.native[0]
+        self.out_width -= self.out_width % 2
+        self.render_width = min(self.native[0], 2 * self.out_width)
+        self.render_width -= self.render_width % 2
+        self._cols = None
+        if p.layout == "gopro":
+            w, h = self.shapes[0]
+            self._cols = gopro_columns(w, h, p.extra)
+        self._graph = None
+        self._in_shape: Optional[tuple] = None
+
+    def _v360_args(self) -> str:
+        w, h = self.render_width, self.render_width // 2
+        if self.p.name == "dual-fisheye":
+            fov = f"{self.p.fov or DEFAULT_FOV['generic']:g}"
+            return f"input=dfisheye:output=e:ih_fov={fov}:iv_fov={fov}:w={w}:h={h}"
+        return f"input=eac:output=e:w={w}:h={h}"
+
+    def _build(self, shape: tuple) -> None:
+        import av
+
+        g = av.filter.Graph()
+        src = g.add_buffer(width=shape[1], height=shape[0], format="rgb24", time_base=Fraction(1, 1000))
+        v360 = g.add("v360", self._v360_args())
+        sink = g.add("buffersink")
+        src.link_to(v360)
+        v360.link_to(sink)
+        g.configure()
+        self._graph, self._src, self._sink, self._in_shape = g, src, sink, shape
+
+    def assemble(self, images: Sequence[np.ndarray]) -> np.ndarray:
+        """The one image ``v360`` reads (layout module doc), as RGB uint8."""
+        if len(images) != self.p.streams:
+            raise InputError(f"{self.p.name}: expected {self.p.streams} image(s), got {len(images)}")
+        if self.p.layout == "gopro":
+            return np.vstack([np.take(img, self._cols, axis=1) for img in images])
+        if self.p.name == "dual-fisheye":
+            if self.p.layout == "two-streams":
+                lenses = list(images)
+            else:
+                img = images[0]
+                half = img.shape[1] // 2
+                lenses = [img[:, :half], img[:, half:2 * half]]
+            if any(self.p.roll):
+                lenses = [_rolled(lens, -r) for lens, r in zip(lenses, self.p.roll)]   # undo the turn
+            if self.p.layout == "two-streams" or any(self.p.roll):
+                return np.hstack(lenses)
+        return images[0]
+
+    def __call__(self, images: Sequence[np.ndarray]) -> np.ndarray:
+        import av
+
+        img = np.ascontiguousarray(self.assemble(images))
+        if self._graph is None or img.shape != self._in_shape:
+            self._build(img.shape)
+        self._src.push(av.VideoFrame.from_ndarray(img, format="rgb24"))
+        out = self._sink.pull()
+        if self.render_width > self.out_width:
+            out = out.reformat(width=self.out_width, height=self.out_width // 2, format="rgb24", interpolation="AREA")
+        return out.to_ndarray(format="rgb24")
+
+
+def _rolled(lens: np.ndarray, degrees: float) -> np.ndarray:
+    """A lens image turned ``degrees`` counter-clockwise about its centre (exact for 90s)."""
+    quarter = degrees / 90.0
+    if float(quarter).is_integer():
+        return np.ascontiguousarray(np.rot90(lens, int(quarter) % 4))
+    import cv2
+
+    h, w = lens.shape[:2]
+    m = cv2.getRotationMatrix2D(((w - 1) / 2.0, (h - 1) / 2.0), degrees, 1.0)
+    return cv2.warpAffine(lens, m, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
