@@ -184,6 +184,42 @@ def _check_arguments(args: argparse.Namespace) -> None:
         check_output(args.plot, [args.output])
     if getattr(args, "json", None) and isinstance(args.json, str):
         check_output(args.json, [args.output, getattr(args, "plot", None)])
+    _distinct_paths(args)
+
+
+def _same_path(a: str, b: str) -> bool:
+    """Whether two paths name one file: the same file on disk (a hard link, a symlink), or,
+    for a file that does not exist yet, the same absolute path once symlinks are resolved."""
+    import os
+
+    try:
+        if os.path.samefile(a, b):
+            return True
+    except OSError:  # one does not exist (yet)
+        pass
+    return os.path.realpath(os.path.expanduser(a)) == os.path.realpath(os.path.expanduser(b))
+
+
+def _distinct_paths(args: argparse.Namespace) -> None:
+    """Refuse a command whose outputs name one file twice, or name one of its inputs, also
+    when none exists yet (``-o m.graphml --plot m.graphml`` wrote the map, then the picture
+    over it, and exited 0)."""
+    from .errors import InputError
+
+    named = [(f"--{k}", getattr(args, k, None)) for k in ("output", "plot", "json")]
+    named = [(flag, path) for flag, path in named if isinstance(path, str) and path]
+    inputs = []
+    for key in ("input", "map", "poses"):
+        value = getattr(args, key, None)
+        inputs += [v for v in (value if isinstance(value, (list, tuple)) else [value]) if isinstance(v, str) and v]
+    for i, (flag, path) in enumerate(named):
+        for other_flag, other in named[:i]:
+            if _same_path(path, other):
+                raise InputError(f"{flag} {path}: the same file as {other_flag} {other}; "
+                                 f"each output needs its own name")
+        for src in inputs:
+            if _same_path(path, src):
+                raise InputError(f"{flag} {path}: the same file as the input {src}; choose another output name")
 
 
 def _load_poses(path: str, topic: Optional[str]):
