@@ -114,7 +114,9 @@ def write_insv(path: Path, frames: int = 20, fov: float = 200.0, lens: int = 256
 
 def write_gopro_360(path: Path, frames: int = 20, face: int = 128, extra: int = 4, gop: int = FPS,
                     gps: list | None = None, cori_yaw_deg_per_s: float = 0.0) -> Path:
-    """``gps``: per second, (lat, lon, alt, fix, precision x100); None: no GPMF track."""
+    """``gps``: one GPS sample per frame, (lat, lon, alt, fix, precision x100), written one
+    payload per second with the GPSF/GPSP of its first sample; None: no GPMF track.
+    CORI turns about z at ``cori_yaw_deg_per_s``, one sample per frame."""
     with av.open(str(path), "w", format="mp4") as out:
         s0 = _video_stream(out, "libx265", 3 * face + 2 * extra, face, gop, "GoPro H.265")
         data = None
@@ -127,14 +129,15 @@ def write_gopro_360(path: Path, frames: int = 20, face: int = 128, extra: int = 
             top, bottom = gopro_strips(panorama(k), face, extra)
             _encode(out, s0, top, k)
             _encode(out, s1, bottom, k)
-            if data is not None and k % FPS == 0 and k // FPS < len(gps):
+            if data is not None and k % FPS == 0 and gps[k:k + FPS]:
                 sec = k // FPS
-                payload = gpmf_payload([gps[sec]] * 1, cori_yaw_deg=[cori_yaw_deg_per_s * (sec + j / FPS)
-                                                                     for j in range(FPS)])
+                fixes = gps[k:k + FPS]
+                payload = gpmf_payload(fixes, cori_yaw_deg=[cori_yaw_deg_per_s * (k + j) / FPS
+                                                            for j in range(len(fixes))])
                 packet = av.Packet(payload)
                 packet.stream = data
                 packet.pts = packet.dts = sec * 1000
-                packet.duration = 1000
+                packet.duration = round(1000 * len(fixes) / FPS)
                 packet.time_base = data.time_base
                 out.mux(packet)
         _flush(out, [s0, s1])
