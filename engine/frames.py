@@ -122,6 +122,16 @@ class FrameSource(ABC):
         for i in self.sample_indices(interval):
             yield self.frame_at(int(i))
 
+    # Where ``headings()`` come from, in words (e.g. "/odom (nav_msgs/msg/Odometry)").
+    heading_note: str = ""
+
+    def headings(self) -> Optional[np.ndarray]:
+        """The heading of every frame's image centre, float64 (frame_count,), in degrees
+        clockwise from north (or from any fixed direction), where the recording says which way
+        the camera looked; None where it does not. The panorama shift uses it when present
+        (``engine.shift.shift_from_heading``) and the image otherwise."""
+        return None
+
     def close(self) -> None:
         pass
 
