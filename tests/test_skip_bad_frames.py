@@ -68,3 +68,57 @@ def test_a_bag_with_a_corrupt_message_is_read_around_it(tmp_path):
     descs = describe(bag, DescribeSettings(interval=0.0, options=OPTIONS, skip_bad_frames=True))
     assert descs.meta["skipped_frames"] == [2]
     assert descs.frames.tolist() == [0, 1, 3, 4, 5]
+
+
+def test_a_damaged_png_prints_only_panotopos_line_not_libpngs(folder_with_a_bad_image, tmp_path, capfd):
+    """libpng writes straight to descriptor 2: captured at that level (capfd), not sys.stderr."""
+    from engine.cli import main
+
+    code = main(["describe", str(folder_with_a_bad_image), "-o", str(tmp_path / "d.npz"), "--no-cache",
+                 "--input-height", "32", "-q"])
+    lines = capfd.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(lines) == 1 and lines[0].startswith("panotopo: error:") and "f3.png" in lines[0]
+    assert not any("libpng" in line for line in lines)
+
+
+@pytest.fixture
+def cut_video(tmp_path) -> tuple[Path, int, int]:
+    """An MP4 with its index at the front, cut short: (path, frames declared, frames readable)."""
+    av = pytest.importorskip("av")
+    from test_video_sampling import write_clip
+
+    good = write_clip(tmp_path / "whole.mp4", gop=25, n=60, faststart=True).read_bytes()
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(good[: int(len(good) * 0.93)])
+    with av.open(str(cut)) as c:
+        stream = c.streams.video[0]
+        declared = int(stream.frames)
+        readable = sum(1 for p in c.demux(stream) if p.size and not p.is_corrupt)
+    assert 0 < readable < declared == 60
+    return cut, declared, readable
+
+
+def test_a_video_cut_short_is_refused_with_the_hint_and_read_as_far_as_it_goes_with_the_flag(cut_video, tmp_path,
+                                                                                             capsys):
+    from test_video_sampling import frame_number
+
+    path, declared, readable = cut_video
+    code, lines = _cli(capsys, "describe", path, "-o", tmp_path / "no.npz", "--no-cache", "--input-height", "32",
+                       "--interval", "0.1", "-q")
+    assert code == 2 and len(lines) == 1
+    assert f"{declared}" in lines[0] and "--skip-bad-frames" in lines[0]
+    out = tmp_path / "d.npz"
+    code, lines = _cli(capsys, "describe", path, "-o", out, "--no-cache", "--input-height", "32",
+                       "--interval", "0.1", "--skip-bad-frames", "-q")
+    assert code == 0, lines
+    assert len(lines) == 1 and f"{readable} of the {declared}" in lines[0]
+    with np.load(out) as z:
+        frames = z["frames"].tolist()
+        meta = json.loads(str(z["meta"]))
+    assert frames and max(frames) < readable and meta["reader_notes"]
+    from engine.sources import open_recording
+
+    with open_recording(path, skip_bad_frames=True) as src:     # the pictures are the frames named
+        for f in src.frames(0.4):
+            assert frame_number(f.rgb) == f.index

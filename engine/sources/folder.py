@@ -230,7 +230,13 @@ class FolderSource(IndexedSource):
 
 def _decode(file: Path, flag: int) -> np.ndarray:
     """RGB of an image file decoded by OpenCV with ``flag`` (full size or reduced)."""
-    bgr = cv2.imread(str(file), flag)
+    if file.suffix.lower() == ".png":   # libpng prints its own error line on a damaged file
+        from .native_stderr import native_messages_dropped
+
+        with native_messages_dropped():
+            bgr = cv2.imread(str(file), flag)
+    else:
+        bgr = cv2.imread(str(file), flag)
     if bgr is None:
         raise InputError(f"{file}: unreadable or corrupt image")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)

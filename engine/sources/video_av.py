@@ -166,6 +166,8 @@ def read_index(path: Path, stream: int = 0) -> StreamIndex:
             for packet in container.demux(stream):
                 if packet.size == 0:  # the demuxer's end-of-stream marker
                     continue
+                if packet.is_corrupt:  # cut short by the end of a damaged file: not a frame
+                    break
                 if packet.pts is None:
                     raise AvUnavailable("packets without presentation times")
                 pts.append(int(packet.pts))
@@ -219,7 +221,9 @@ class AvSampler:
         indexes = [read_index(self.path, k) for k in range(streams)]
         self.missing = max(ix.missing for ix in indexes)
         if self.missing and not allow_truncated:
-            raise InputError(truncation_message(self.path, max(indexes, key=lambda ix: ix.missing)))
+            raise InputError(truncation_message(self.path, max(indexes, key=lambda ix: ix.missing)) +
+                             "; to read the frames before the damage, use --skip-bad-frames "
+                             "(in the app: Skip bad frames)")
         self.indexes = _paired(self.path, indexes)
         self.index = self.indexes[0]
         self.shapes = _stream_shapes(self.path, streams)
