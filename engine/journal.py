@@ -18,6 +18,11 @@ and it is compacted (emptied) once the session has been saved.
   journal is open for writing; a second instance gets ``JournalLocked`` naming the
   holder's pid and host, and may open it ``read_only`` instead. The lock is released by
   the kernel when its holder dies, so a kill -9 never leaves a stale lock.
+* Nothing left behind: the journal file is created by the first record, not by
+  opening; ``close`` removes it when it holds no record (a clean quit, a save that
+  compacted everything) and removes the lock file it holds. A lock or journal path
+  that is a symlink or not a regular file is refused (``UnsafeJournal``, an OSError):
+  the journal never writes through a name someone else planted.
 * Fallback: when the session's folder cannot be written (a read-only share, a DVD, a
   folder of another user), the journal goes to
   ``$XDG_STATE_HOME/panotopo/journals/<sha1 of the session path>-<name>.journal``
@@ -29,6 +34,7 @@ Plain Python, no Qt: the app calls ``append`` on every decision.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -41,6 +47,27 @@ from .errors import PanotopoError
 
 JOURNAL_SUFFIX = ".journal"
 LOCK_SUFFIX = ".lock"
+
+
+class UnsafeJournal(OSError):
+    """A journal or lock path is a symlink or not a regular file: refused, nothing written."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        super().__init__(f"{path} is a link or not a regular file; refused")
+        self.strerror = f"{path.name} is a link or not a regular file (refused)"
+
+
+def check_own(path: Path) -> None:
+    """Raise ``UnsafeJournal`` when ``path`` exists and is not a plain regular file of ours."""
+    import stat
+
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1 or (hasattr(os, "getuid") and st.st_uid != os.getuid()):
+        raise UnsafeJournal(path)
 
 
 class JournalLocked(PanotopoError):
@@ -149,36 +176,58 @@ class Journal:
             return journal
         if use_fallback:
             path.parent.mkdir(parents=True, exist_ok=True, mode=0o700)
+        check_own(path)
         journal._lock()
-        try:
-            journal._open_for_append()
-        except BaseException:
-            journal.close()
-            raise
-        return journal
+        journal._seq = max((r["seq"] for rs in journal._all_records() for r in rs), default=0)
+        return journal   # the journal file itself is created by the first record
 
     def _lock(self) -> None:
         import fcntl
 
-        lock_path = self.path.with_name(self.path.name + LOCK_SUFFIX)
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown process"
+        lock_path = self.lock_path
+        for _attempt in range(20):
+            check_own(lock_path)
+            try:
+                fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+            except OSError as exc:
+                if exc.errno == errno.ELOOP:
+                    raise UnsafeJournal(lock_path) from None
+                raise
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                holder = os.pread(fd, 200, 0).decode("utf-8", "replace").strip() or "unknown process"
+                os.close(fd)
+                raise JournalLocked(self.session_path, holder) from None
+            try:   # the holder before us may have removed the file between our open and our lock
+                same = os.stat(lock_path, follow_symlinks=False).st_ino == os.fstat(fd).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
             os.close(fd)
-            raise JournalLocked(self.session_path, holder) from None
+        else:
+            raise OSError(errno.EAGAIN, f"{lock_path}: could not be locked")
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}\n".encode(), 0)
         self._lock_fd = fd
 
+    @property
+    def lock_path(self) -> Path:
+        return self.path.with_name(self.path.name + LOCK_SUFFIX)
+
     def _open_for_append(self) -> None:
         from .outputs import sync_folder
 
+        check_own(self.path)
         whole = _read_records(self.path)[2]
-        self._seq = max((r["seq"] for rs in self._all_records() for r in rs), default=0)
         created = not self.path.exists()
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o600)
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o600)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise UnsafeJournal(self.path) from None
+            raise
         if os.fstat(fd).st_size > whole:
             os.ftruncate(fd, whole)      # cut a torn last line so the next record starts clean
             os.fsync(fd)
@@ -200,7 +249,9 @@ class Journal:
         """Write ``record`` (JSON-ready) as the next line and force it to disk before
         returning its sequence number."""
         if self._fd is None:
-            raise PanotopoError(f"{self.path}: the journal is not open for writing")
+            if self._lock_fd is None:
+                raise PanotopoError(f"{self.path}: the journal is not open for writing")
+            self._open_for_append()   # the first record creates the file
         self._seq += 1
         line = json.dumps({"seq": self._seq, "time": time.time(), "data": record},
                           separators=(",", ":"), allow_nan=False) + "\n"
@@ -226,7 +277,7 @@ class Journal:
     def compact(self, upto: Optional[int] = None) -> None:
         """Drop the records a successful save now holds: all of them, or those with
         ``seq <= upto`` (records appended while the save was running are kept)."""
-        if self._fd is None:
+        if self._lock_fd is None:
             raise PanotopoError(f"{self.path}: the journal is not open for writing")
         keep = [r for recs in self._all_records() for r in recs if upto is not None and r["seq"] > upto]
         for p in self.paths:
@@ -235,19 +286,58 @@ class Journal:
                     p.unlink()
                 except OSError:
                     pass
-        if not keep:
-            os.ftruncate(self._fd, 0)
-            os.fsync(self._fd)
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        if not keep:   # nothing left to keep: no file (the next record creates it again)
+            self._remove_own(self.path)
             return
-        from .outputs import write_text
-
         keep.sort(key=lambda r: r["seq"])
-        write_text(self.path, "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in keep))
-        os.close(self._fd)   # the file was replaced: append to the new one
+        self._replace_own(self.path, "".join(json.dumps(r, separators=(",", ":")) + "\n" for r in keep))
         self._fd = os.open(self.path, os.O_RDWR | os.O_APPEND | os.O_NOFOLLOW)
 
+    @staticmethod
+    def _remove_own(path: Path) -> None:
+        try:
+            check_own(path)
+            path.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:
+            pass   # not ours (refused) or not removable: left as it is
+
+    @staticmethod
+    def _replace_own(path: Path, text: str) -> None:
+        """Write ``path`` atomically as a new regular file (a rename never follows a link)."""
+        import tempfile
+
+        from .outputs import sync_folder
+
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(text.encode("utf-8"))
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+            raise
+        sync_folder(path.parent)
+
     def close(self) -> None:
-        """Release the file and the lock (the records stay until compacted)."""
+        """Release the file and the lock (the records stay until compacted); a journal
+        file with no record and the lock file are removed, so nothing is left behind."""
+        if self._lock_fd is not None:   # ours: tidy up while we still hold the lock
+            try:
+                if self.path.exists() and os.lstat(self.path).st_size == 0:
+                    self._remove_own(self.path)
+            except OSError:
+                pass
+            self._remove_own(self.lock_path)
         for attr in ("_fd", "_lock_fd"):
             fd = getattr(self, attr)
             if fd is not None:

@@ -70,12 +70,22 @@ class Session:
             data["poses"] = {"path": _portable(self.poses_path, base_dir), "topic": self.poses_topic}
         return data
 
-    def save(self, path: str | Path) -> None:
-        """Write atomically: the old file stays intact until the new one is complete."""
+    def save(self, path: str | Path, own: bool = False) -> None:
+        """Write atomically: the old file stays intact until the new one is complete.
+
+        ``own``: ``path`` is a name the app chose itself (the session or autosave beside
+        the recording): it is written only as a regular file of this user, never through a
+        symlink or a hard link someone planted there (``InputError`` naming it); the new
+        file replaces the name itself, so a link planted meanwhile is replaced, not followed.
+        """
+        path = Path(path)
+        text = json.dumps(self.to_json(path.parent), indent=1, sort_keys=True)
+        if own:
+            write_own(path, text)
+            return
         from .outputs import write_text
 
-        path = Path(path)
-        write_text(path, json.dumps(self.to_json(path.parent), indent=1, sort_keys=True))
+        write_text(path, text)
 
     # -- reading ---------------------------------------------------------------
     @classmethod
@@ -137,3 +147,28 @@ def _portable(path: str, base_dir: Optional[Path]) -> str:
 def _resolve(text: str, base: Path) -> str:
     p = Path(text)
     return str(p if p.is_absolute() else (base / p).resolve())
+
+
+def check_own_file(path: Path) -> None:
+    """OutputError (an InputError and an OSError) when ``path`` exists and is not a plain
+    regular file of this user."""
+    from .errors import OutputError
+    from .journal import UnsafeJournal, check_own
+
+    try:
+        check_own(Path(path))
+    except UnsafeJournal:
+        raise OutputError(f"{path}: is a link or not a regular file of yours; panotopo will not write "
+                         "through it (remove it, or save the session under another name)") from None
+
+
+def write_own(path: Path, text: str) -> None:
+    """``text`` into ``path`` as a new regular file (see ``Session.save(own=True)``)."""
+    from .errors import OutputError
+    from .journal import Journal
+
+    check_own_file(path)
+    try:
+        Journal._replace_own(Path(path), text)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot write ({exc.strerror or exc.__class__.__name__})") from None

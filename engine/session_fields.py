@@ -17,6 +17,7 @@ from . import validate
 from .errors import InputError
 
 STATUSES = ("auto", "confirmed", "rejected", "manual")
+LABEL_MAX = 1000   # characters of a place name (the app's field enforces it where it is typed)
 
 
 def _fail(name: str, what: str, value: Any) -> InputError:
@@ -88,8 +89,8 @@ def check_decisions(value: Any, name: str = "decisions") -> dict:
             item = _mapping(item, where)
             if key == "labels":
                 label = item.get("label")
-                if not isinstance(label, str) or len(label) > 1000:
-                    raise _fail(f"{where}.label", "a text of at most 1000 characters", label)
+                if not isinstance(label, str) or len(label) > LABEL_MAX:
+                    raise _fail(f"{where}.label", f"a text of at most {LABEL_MAX} characters", label)
                 items.append({"frame": _frame(item.get("frame"), f"{where}.frame"), "label": label})
                 continue
             clean = dict(item)

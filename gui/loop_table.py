@@ -275,6 +275,7 @@ class LoopTable(QWidget):
         layout.addWidget(self.view, 1)
 
         self._last_key: Optional[LoopKey] = None
+        self._emitted: Optional[LoopKey] = None   # the key the views were last told of
         doc.mapReplaced.connect(self.refresh)
         doc.loopsChanged.connect(self.refresh)
         doc.labelsChanged.connect(self.refresh)
@@ -302,6 +303,7 @@ class LoopTable(QWidget):
         if key is None:
             self.view.clearSelection()
             self.view.setCurrentIndex(QModelIndex())
+            self._last_key = self._emitted = None   # nothing of it may come back on the next map
             return False
         row = self.model.row_of(tuple(key))
         if row is None:
@@ -333,7 +335,10 @@ class LoopTable(QWidget):
         for r in rows:
             selection.select(self.proxy.index(r, 0), self.proxy.index(r, len(COLUMNS) - 1))
         sm = self.view.selectionModel()
-        sm.setCurrentIndex(self.proxy.index(rows[0], 0), QItemSelectionModel.NoUpdate)
+        # The current row stays where the user left it when it is still selected (issue 43,
+        # defect 8: after a bulk decision it jumped back to the first selected row).
+        current = sm.currentIndex().row() if sm.currentIndex().isValid() else -1
+        sm.setCurrentIndex(self.proxy.index(current if current in rows else rows[0], 0), QItemSelectionModel.NoUpdate)
         sm.select(selection, QItemSelectionModel.ClearAndSelect)
 
     def step(self, delta: int) -> None:
@@ -350,10 +355,22 @@ class LoopTable(QWidget):
         self.view.selectionModel().setCurrentIndex(
             index, QItemSelectionModel.ClearAndSelect | QItemSelectionModel.Rows)
         self.view.scrollTo(index)
+        self._announce()
+
+    def _announce(self) -> None:
+        """Tell the views the selected loop when they were not told yet: selecting the row that
+        is already current emits nothing from Qt (issue 43, defect 5: a session restored the row
+        of the loop last shown, and the pair view stayed empty)."""
+        if self.view.selectionModel().signalsBlocked():
+            return
+        key = self.selected_key()
+        if key is not None and key != self._emitted:
+            self._emitted = key
+            self.loopSelected.emit(key)
 
     def _current_changed(self, current: QModelIndex, _previous: QModelIndex) -> None:
         key = self.proxy.data(self.proxy.index(current.row(), 0), KEY_ROLE) if current.isValid() else None
-        self._last_key = key
+        self._last_key = self._emitted = key
         self.loopSelected.emit(key)
 
     # -- refresh ---------------------------------------------------------------------
@@ -375,6 +392,7 @@ class LoopTable(QWidget):
                     self._select_proxy_row(row)
         finally:
             sm.blockSignals(False)
+        self._announce()   # a row selected again on a new map: the views show its loop
 
     def _filter_changed(self) -> None:
         keys = self.selected_keys()

@@ -17,12 +17,13 @@ from typing import Optional
 
 from PySide6.QtCore import QEvent, QKeyCombination, QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QCloseEvent, QDragEnterEvent, QDropEvent, QIcon, QKeySequence, QUndoStack
-from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDialog, QLabel, QMainWindow,
+from PySide6.QtWidgets import (QApplication, QDockWidget, QFileDialog, QInputDialog, QLabel, QLineEdit, QMainWindow,
                                QMessageBox, QProgressBar, QPushButton, QSplitter, QTabWidget)
 
 from engine.errors import InputError
-from engine.journal import Journal, JournalLocked, journal_session_path
+from engine.journal import JournalLocked
 from engine.params import MapParams
+from engine.session_fields import LABEL_MAX
 from engine.session import Session, autosave_path_for, is_session_file, session_path_for
 
 from .background import LatestOnly
@@ -39,6 +40,7 @@ from .model import commands as edits
 from .model.document import needs_remap
 from .model.keys import bad_overrides, shortcut_table
 from .model.queue import ReviewQueue
+from .model.recording_files import RecordingFiles, Unsaved
 from .node_panel import NodePanel
 from .pair_evidence import pair_yaw
 from .pair_view import PairView
@@ -68,6 +70,7 @@ class MainWindow(QMainWindow):
         self.describe_options = dict(describe_options or {})
         self.interactive = interactive
         self.doc = Document(self)
+        self.files = RecordingFiles(journaling=interactive)  # session, autosave, journal (gui.model)
         self.frames = FrameCache()
         self.undo_stack = QUndoStack(self)
         self.doc.history = QtHistory(self.undo_stack, self.doc)  # the model's commands, on Qt's stack
@@ -288,6 +291,11 @@ class MainWindow(QMainWindow):
         self.cancel_button = QPushButton("Cancel")
         self.cancel_button.setToolTip("Stop the run (Esc); the current map and decisions are kept")
         self.cancel_button.clicked.connect(self.cancel_run)
+        # Shown for as long as decisions are not journaled (issue 43, defect 14): not only a log line.
+        self.journal_label = QLabel()
+        self.journal_label.setStyleSheet("color: #c0392b; font-weight: bold")
+        self.journal_label.setVisible(False)
+        status.addPermanentWidget(self.journal_label)
         status.addPermanentWidget(self.summary_label)
         status.addPermanentWidget(self.progress_bar)
         status.addPermanentWidget(self.eta_label)
@@ -328,7 +336,7 @@ class MainWindow(QMainWindow):
         self.doc.mapReplaced.connect(self._update_actions)
         self.doc.loopsChanged.connect(self._update_actions)
         self.doc.mapReplaced.connect(self._request_similarity)
-        self.doc.journalFailed.connect(self.warn)
+        self.doc.journalFailed.connect(self._journal_failed)
         self.tabs.currentChanged.connect(self._request_similarity)
         # Ctrl+Z in the place-name field: the app's undo once the name is applied (defect 7).
         self.node_panel.name.installEventFilter(self)
@@ -347,6 +355,7 @@ class MainWindow(QMainWindow):
         if params.method not in __import__("engine.params", fromlist=["METHODS"]).METHODS:
             params = MapParams()
         self.doc.params = params
+        self._start_params = params   # what a newly opened recording starts from
         self.params_panel.set_params(params, {})
         describe = self.defaults["describe"]
         self.params_panel.set_describe(str(describe.get("descriptor", self.params_panel.descriptor_name())),
@@ -383,7 +392,7 @@ class MainWindow(QMainWindow):
         return ok
 
     def _open_input(self, p: Path, topic: Optional[str], pose_topic: Optional[str], run: bool,
-                    session: Optional[Session] = None) -> bool:
+                    session: Optional[Session] = None, session_file: Optional[Path] = None) -> bool:
         from engine.pipeline import DescribeSettings, is_descriptor_file
 
         if not p.exists():
@@ -414,7 +423,10 @@ class MainWindow(QMainWindow):
                                             shift=params.uses_shift,
                                             options=self._panel_options(self.describe_options, descriptor))
 
-        if not self._attach_journal(p):
+        try:
+            self.files.attach(p)
+        except JournalLocked as exc:
+            self.error(f"{p.name} is open in another panotopo window ({exc.holder}): close it there first")
             return False
 
         # A new document: nothing of the previous one survives.
@@ -427,82 +439,83 @@ class MainWindow(QMainWindow):
         self.doc.clear_map()
         self.doc.set_poses(None, None)
         self.doc.session_path = None
+        self.doc.journal = self.files.journal
         self.doc.describe_settings = settings
-        self.doc.params = session.map_params() if session else self.params_panel.params()
-        self._pending_decisions = dict(session.decisions) if session else None
-        self._pending_view = dict(session.view) if session else {}
+        # A new recording starts from the starting parameters (issue 43, defect 3): never
+        # from what was set on the recording open before.
+        self.doc.params = session.map_params() if session else self._start_params
+        self._pending_decisions = None
+        self._pending_view = {}
         self.doc.set_source(p, source)
         self.doc.mapReplaced.emit()  # views clear
         self.select_pair_key(None)   # nothing of the previous recording stays selected (defect 5)
         self.params_panel.set_describe(settings.descriptor, settings.interval)
-        self.params_panel.set_params(self.doc.params, self._defaults)
-
         self._load_initial_poses(p, session, pose_topic)
-        if session is None and not descriptors_file:
-            self._offer_saved_work(p)
-        self._recover_journal()
+        self._restore_saved_work(p, session, session_file)
+        self.params_panel.set_params(self.doc.params, {})   # unset thresholds: "auto" until the map is built
+        self._show_journal_state()
         self._update_title()
         self.statusBar().showMessage(f"Opened {p.name}", 5000)
         if run:
             self.start_run()
         return True
 
-    # ==== the decision journal (engine.journal): every decision on disk as it is made ===========
-    def _attach_journal(self, p: Path) -> bool:
-        """Open the journal of recording ``p`` for this window; False when another panotopo has it.
-
-        The document appends every decision record to it (``MapDocument.record_decision``).
-        """
-        if not self.interactive:  # a screenshot or scripted run neither takes nor writes the user's journal
-            return True
-        old = self.doc.journal
-        if old is not None and old.session_path == journal_session_path(p):
-            old.close()  # reopening the same recording: release our own lock first
-            self.doc.journal = old = None
-        try:
-            journal = Journal.open(p)
-        except JournalLocked as exc:
-            self.error(f"{p.name} is open in another panotopo window ({exc.holder}): close it there first")
-            return False
-        except OSError as exc:
-            journal = None
-            self.warn(f"Decisions on {p.name} cannot be journaled ({exc.strerror or exc}); "
-                      "save often (autosave still runs)")
-        if old is not None:
-            old.close()
-        self.doc.journal = journal
-        if journal is not None and journal.fallback:
-            self.statusBar().showMessage(f"The recording's folder is read-only: decisions are journaled "
-                                         f"in {journal.path.parent}", 10000)
-        return True
-
-    def _recover_journal(self) -> None:
-        """Decisions made after the last save (the app was killed): replayed over the saved ones."""
-        journal = self.doc.journal
-        records = journal.replay() if journal is not None else []
-        if not records:
+    # ==== saved and unsaved work (gui.model.recording_files) ===================================
+    def _restore_saved_work(self, p: Path, session: Optional[Session], session_file: Optional[Path]) -> None:
+        """The recording's saved session, whichever file was opened, and unsaved work only if
+        the user says so (issue 43, defect 17): "No" restores nothing and drops it."""
+        saved_path = session_file if session is not None else self.files.saved_session(p)
+        saved = session
+        if saved is None and saved_path is not None:
+            try:
+                saved = Session.load(saved_path)
+            except InputError as exc:
+                self.warn(str(exc))
+                saved_path = None
+        unsaved, warnings = self.files.unsaved(p, saved_path)
+        for text in warnings:
+            self.warn(text)
+        if unsaved:
+            if self._ask_yes_no("Restore unsaved work",
+                                f"Unsaved work on {p.name} was found ({unsaved.describe()}). Restore it?"):
+                pass
+            else:
+                if self.interactive:
+                    self.files.discard(p)   # declined: it must not come back on the next open
+                unsaved = Unsaved()
+        if saved is None and not unsaved:
             return
-        from .model import journal as journal_records
+        restored = self.files.restore(unsaved, saved)
+        if restored.session is not None and restored.session is not session:
+            self.doc.params = restored.session.map_params()
+        self._pending_decisions = restored.decisions
+        self._pending_view = dict(restored.session.view) if restored.session is not None else {}
+        self.doc.session_path = saved_path
+        if unsaved:
+            self._extra_dirty = True
+            self.statusBar().showMessage(f"Unsaved work restored ({unsaved.describe()}; not saved yet)", 10000)
+        elif saved_path is not None:
+            self.statusBar().showMessage(f"Decisions restored from {saved_path.name}", 8000)
+        if restored.skipped:
+            self.warn(f"{restored.skipped} journal records of {p.name} could not be read and were skipped; "
+                      "the others were restored")
 
-        self._pending_decisions = journal_records.replay(records, self._pending_decisions or {})
-        self._extra_dirty = True
-        self.statusBar().showMessage(f"{len(records)} decisions made after the last save were recovered "
-                                     "(not saved yet)", 10000)
+    def _show_journal_state(self) -> None:
+        problem = self.files.problem
+        self.journal_label.setText("Not journaled" if problem else "")
+        self.journal_label.setToolTip(problem)
+        self.journal_label.setVisible(bool(problem))
+        if problem:
+            self.warn(problem)
 
-    def _compact_journal(self, upto: Optional[int] = None) -> None:
-        """The session on disk now holds the journal's records (or the user discarded them)."""
-        journal = self.doc.journal
-        if journal is None:
-            return
-        try:
-            journal.compact(upto)
-        except OSError as exc:
-            self.statusBar().showMessage(f"Journal not compacted: {exc}", 8000)
+    def _journal_failed(self, message: str) -> None:
+        self.files.journal_failed(message)
+        self._show_journal_state()
 
     def _open_session(self, path: Path, run: bool = True) -> bool:
         session = Session.load(path)
         ok = self._open_input(Path(session.input_path), session.describe.get("topic"), None, run=run,
-                              session=session)
+                              session=session, session_file=path)
         if ok:
             self.doc.session_path = path
             self._update_title()
@@ -575,33 +588,6 @@ class MainWindow(QMainWindow):
                         break
         except InputError as exc:
             self.warn(f"Ground-truth poses not loaded: {exc}")
-
-    def _offer_saved_work(self, p: Path) -> None:
-        """Reopen the saved session of this recording, or an autosave newer than it."""
-        saved, auto = session_path_for(p), autosave_path_for(p)
-        chosen: Optional[Path] = None
-        if auto.is_file() and (not saved.is_file() or auto.stat().st_mtime > saved.stat().st_mtime):
-            if self._ask_yes_no("Restore unsaved work",
-                                f"An autosave of unsaved decisions on {p.name} was found. Restore it?"):
-                chosen = auto
-        if chosen is None and saved.is_file():
-            chosen = saved
-        if chosen is None:
-            return
-        try:
-            session = Session.load(chosen)
-        except InputError as exc:
-            self.warn(str(exc))
-            return
-        self.doc.params = session.map_params()
-        self._pending_decisions = dict(session.decisions)
-        self._pending_view = dict(session.view)
-        self.params_panel.set_params(self.doc.params, self._defaults)
-        if chosen == saved:
-            self.doc.session_path = saved
-        else:
-            self._extra_dirty = True
-        self.statusBar().showMessage(f"Decisions restored from {chosen.name}", 8000)
 
     # ==== poses ==========================================================================
     def load_poses_dialog(self) -> None:
@@ -766,16 +752,15 @@ class MainWindow(QMainWindow):
             w.setVisible(on)
         self.cancel_button.setEnabled(on)
 
-    def _used_defaults(self) -> dict:
-        """What an unset threshold stands for in the current map: the value it was built with
-        (``verified`` calibrates its node threshold from the recording), else the descriptor's."""
-        shown = dict(self._defaults)
+    def _used_defaults(self, built: bool = True) -> dict:
+        """What an unset threshold stands for, where that is known
+        (``gui.model.run_plan.known_thresholds``); the others read "auto". ``built``: the map
+        shown was built with the parameters of now (else its meta says nothing about them)."""
+        from .model.run_plan import known_thresholds
+
         topomap = self.doc.topomap
-        if topomap is not None and topomap.meta.get("method") == self.doc.params.method:
-            for name in ("node_sim_th", "loop_sim_th"):
-                if isinstance(topomap.meta.get(name), (int, float)):
-                    shown[name] = float(topomap.meta[name])
-        return shown
+        meta = topomap.meta if topomap is not None and built else None
+        return known_thresholds(self.doc.params, meta, self._defaults)
 
     def _set_known_shifts(self, descs) -> None:
         self.frames.known_shifts = ({int(f): int(s) for f, s in zip(descs.frames, descs.shifts)}
@@ -805,7 +790,9 @@ class MainWindow(QMainWindow):
         from engine.pipeline import DescribeSettings, descriptors_fit, method_settings
 
         self.doc.params = new
-        self.params_panel.set_params(new, self._defaults)
+        if self.doc.input_path is None:   # set before any recording is open: where recordings start
+            self._start_params = new
+        self.params_panel.set_params(new, self._used_defaults(built=False))
         descs = self.doc.descs
         if descs is None or self._preparing_run is not None:
             return  # the run's map is on its way; it is rebuilt with ``new`` when it lands
@@ -960,12 +947,21 @@ class MainWindow(QMainWindow):
         k = self.doc.node_at_or_before(max(self.frame_viewer.current_frame, 0))
         frame = int(self.doc.node_data(self.doc.node_id(k))["frame"])
         old = self.doc.label_of_frame(frame)
-        text, ok = QInputDialog.getText(self, "Name this place", f"Place name of node n{k} (frame {frame}):", text=old)
-        if ok:
-            self.set_label(frame, text.strip())
+        dialog = QInputDialog(self)
+        dialog.setWindowTitle("Name this place")
+        dialog.setLabelText(f"Place name of node n{k} (frame {frame}):")
+        dialog.setTextValue(old)
+        field = dialog.findChild(QLineEdit)
+        if field is not None:
+            field.setMaxLength(LABEL_MAX)   # enforced where it is typed (issue 43, defect 16)
+        if dialog.exec() == QInputDialog.Accepted:
+            self.set_label(frame, dialog.textValue().strip())
 
     def set_label(self, frame: int, label: str) -> None:
         old = self.doc.label_of_frame(frame)
+        if len(label) > LABEL_MAX:
+            self.warn(f"A place name has at most {LABEL_MAX} characters; this one has {len(label)}")
+            return
         if label != old:
             self.doc.push(edits.SetLabel(frame, old, label))
 
@@ -1028,7 +1024,8 @@ class MainWindow(QMainWindow):
         settings = self.doc.describe_settings
         decisions = self.doc.decisions() if self.doc.has_map else (self._pending_decisions or {})
         key = self.selected_key()
-        view = {"frame": self.frame_viewer.current_frame, "tab": self.tabs.currentIndex(),
+        frame = self.frame_viewer.current_frame
+        view = {"frame": frame if frame >= 0 else None, "tab": self.tabs.currentIndex(),  # -1: no frames shown
                 "filter": self.loop_table.filter.currentIndex(),
                 "selected": list(key) if key is not None else None}
         return Session(input_path=str(self.doc.input_path), describe=settings.as_dict() if settings else {},
@@ -1039,18 +1036,14 @@ class MainWindow(QMainWindow):
         if self.doc.input_path is None:
             return False
         target = Path(path) if path else (self.doc.session_path or session_path_for(self.doc.input_path))
-        journaled = self.doc.journal.last_seq if self.doc.journal is not None else None
         try:
-            self.current_session().save(target)
-        except OSError as exc:
-            self.error(f"Could not save the session to {target}: {exc.strerror or exc}")
+            self.files.save(self.current_session(), target)
+        except (OSError, InputError) as exc:
+            self.error(f"Could not save the session to {target}: {getattr(exc, 'strerror', None) or exc}")
             return False
         self.doc.session_path = target
         self.undo_stack.setClean()
         self._extra_dirty = False
-        if target == session_path_for(self.doc.input_path):  # the session the journal replays over
-            self._compact_journal(journaled)
-        autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
         self._update_title()
         self._add_recent(str(target))
         self.statusBar().showMessage(f"Session saved to {target}", 5000)
@@ -1068,8 +1061,8 @@ class MainWindow(QMainWindow):
         if self.doc.input_path is None or not self.is_modified():
             return
         try:
-            self.current_session().save(autosave_path_for(self.doc.input_path))
-        except OSError as exc:
+            self.files.autosave(self.current_session())
+        except (OSError, InputError) as exc:
             self.statusBar().showMessage(f"Autosave failed: {exc}", 8000)
 
     def _restore_view(self) -> None:
@@ -1096,8 +1089,7 @@ class MainWindow(QMainWindow):
         if answer == QMessageBox.Save:
             return self.save_session()
         if answer == QMessageBox.Discard:
-            autosave_path_for(self.doc.input_path).unlink(missing_ok=True)
-            self._compact_journal()  # discarded: they must not come back on the next open
+            self.files.discard(self.doc.input_path)  # discarded: they must not come back on the next open
             self.undo_stack.setClean()
             self._extra_dirty = False
             return True
@@ -1317,9 +1309,8 @@ class MainWindow(QMainWindow):
         self.runner.stop()
         self.remapper.stop()
         self.similarity_worker.stop()
-        if self.doc.journal is not None:
-            self.doc.journal.close()  # the records stay until a save compacts them
-            self.doc.journal = None
+        self.files.close()  # the records stay until a save compacts them; nothing empty is left
+        self.doc.journal = None
         app = QApplication.instance()
         if app is not None and self._watching_focus:
             self._watching_focus = False

@@ -34,6 +34,9 @@ def proposed_partner(doc: Document, first: int) -> int:
     n = doc.node_count()
     gap = temporal_gap(doc)
     far = np.abs(np.arange(n) - first) >= gap
+    joined = _joined(doc, first)
+    if (far & ~joined).any():   # never a pair already joined: OK would be disabled (issue 43, defect 4)
+        far &= ~joined
     if not far.any():
         far = np.arange(n) != first
         if not far.any():
@@ -42,6 +45,16 @@ def proposed_partner(doc: Document, first: int) -> int:
     if sim is not None and sim.shape[0] == n:
         return int(np.argmax(np.where(far, sim[first], -np.inf)))
     return int(np.argmax(np.where(far, np.abs(np.arange(n) - first), -1)))
+
+
+def _joined(doc: Document, first: int) -> np.ndarray:
+    """(n,) True for the nodes already joined to ``first`` (by the path or a loop)."""
+    n = doc.node_count()
+    out = np.zeros(n, bool)
+    g = doc.topomap.graph
+    for other in g.neighbors(doc.node_id(first)):
+        out[int(g.nodes[other]["index"])] = True
+    return out
 
 
 class ManualLoopDialog(QDialog):
@@ -53,9 +66,11 @@ class ManualLoopDialog(QDialog):
         n = doc.node_count()
         # Every widget _update touches exists before the first valueChanged can call it.
         self.a_info, self.b_info = QLabel(), QLabel()
+        # One short line, in room kept for it: a long wrapped warning squashed both node
+        # fields to a few pixels (issue 43, defect 4); the full reason is in its tooltip.
         self.warning = QLabel()
-        self.warning.setWordWrap(True)
         self.warning.setStyleSheet("color: #c0392b")
+        self.warning.setMinimumHeight(self.warning.fontMetrics().height() + 4)
         self.buttons = QDialogButtonBox(QDialogButtonBox.Ok | QDialogButtonBox.Cancel)
         self.buttons.accepted.connect(self.accept)
         self.buttons.rejected.connect(self.reject)
@@ -75,6 +90,7 @@ class ManualLoopDialog(QDialog):
         form.addRow("Second node", self.b)
         form.addRow("", self.b_info)
         layout = QVBoxLayout(self)
+        layout.setSizeConstraint(QVBoxLayout.SetMinimumSize)   # the dialog grows; fields never shrink
         layout.addWidget(QLabel("Join two nodes that are the same place:"))
         layout.addLayout(form)
         layout.addWidget(self.warning)
@@ -97,13 +113,18 @@ class ManualLoopDialog(QDialog):
         self.a_info.setText(self._describe(a))
         self.b_info.setText(self._describe(b))
         g = self.doc.topomap.graph
-        problem, caution = "", ""
+        problem, caution, why = "", "", ""
         if a == b:
             problem = "Choose two different nodes."
         elif g.has_edge(self.doc.node_id(a), self.doc.node_id(b)):
             problem = "These nodes are already joined."
+            why = "The path or a loop joins them already: choose another second node."
         elif abs(a - b) < temporal_gap(self.doc):
-            caution = (f"n{a} and n{b} are temporal neighbours ({abs(a - b)} steps apart on the path): "
-                       "a loop between them is not a revisit. Add it only if you are sure.")
+            caution = f"Temporal neighbours ({abs(a - b)} steps apart): not a revisit."
+            why = (f"n{a} and n{b} are {abs(a - b)} steps apart on the path: a loop between them joins a "
+                   "place to itself, not a revisit. Add it only if you are sure.")
         self.warning.setText(problem or caution)
-        self.buttons.button(QDialogButtonBox.Ok).setEnabled(not problem)
+        self.warning.setToolTip(why)
+        ok = self.buttons.button(QDialogButtonBox.Ok)
+        ok.setEnabled(not problem)
+        ok.setToolTip(problem)   # a disabled OK says why

@@ -9,6 +9,8 @@ from PySide6.QtGui import QBrush, QColor
 from PySide6.QtWidgets import (QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QListWidget,
                                QListWidgetItem, QPushButton, QSizePolicy, QVBoxLayout, QWidget)
 
+from engine.session_fields import LABEL_MAX
+
 from .document import Document
 from .style import STATUS_COLORS
 
@@ -31,6 +33,7 @@ class NodePanel(QWidget):
             label.setWordWrap(True)
             label.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
         self.name = QLineEdit()
+        self.name.setMaxLength(LABEL_MAX)   # a longer name would make the session refuse to load
         self.name.setPlaceholderText("e.g. kitchen, lab door, crossing A")
         self.name.setToolTip("Place name of this node (Enter to apply; undo with Ctrl+Z)")
         self.name.returnPressed.connect(self._apply_name)

@@ -16,6 +16,7 @@ from dataclasses import replace
 from typing import Optional
 
 from PySide6.QtCore import QEvent, QObject, Qt, Signal
+from PySide6.QtGui import QValidator
 from PySide6.QtWidgets import (QAbstractSpinBox, QApplication, QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout,
                                QFrame, QGroupBox, QHBoxLayout, QPushButton, QScrollArea, QSpinBox, QVBoxLayout,
                                QWidget)
@@ -91,8 +92,10 @@ class ParamsPanel(QWidget):
             self.method.setItemData(self.method.count() - 1, METHOD_TIPS.get(m, m), 3)
         self.method.setToolTip("Loop detection method (Table I of the paper)")
         self.node_sim_th = _double(0.0, 1.0, 0.01, "Similarity above which a frame is merged into the current node "
-                                                   "(verified: calibrated from the recording unless you change it)")
-        self.loop_sim_th = _double(-1.0, 1.0, 0.01, "Similarity above which two nodes may be the same place")
+                                                   "(verified: calibrated from the recording unless you change it; "
+                                                   "'auto' until the map is built)", threshold=True)
+        self.loop_sim_th = _double(-1.0, 1.0, 0.01, "Similarity above which two nodes may be the same place",
+                                   threshold=True)
         self.window_size = _int(1, 100, "Nodes per sliding window of the spatial consistency check")
         self.count_th = _int(0, 100, "A window is a candidate when more than this many of its nodes match")
         self.neighbor_node_num = _int(0, 1000, "Temporal neighbours of the query that windows must avoid")
@@ -200,8 +203,10 @@ class ParamsPanel(QWidget):
             self.method.setCurrentIndex(max(i, 0))
             for name in ("node_sim_th", "loop_sim_th"):
                 value = getattr(shown, name)
+                box = getattr(self, name)
                 if value is not None:
-                    getattr(self, name).setValue(float(value))
+                    box.setValue(float(value))
+                box.set_unknown(value is None)   # the value the map will use is not known yet
             self.window_size.setValue(int(shown.window_size))
             self.count_th.setValue(int(shown.count_th))
             self.neighbor_node_num.setValue(int(shown.neighbor_node_num))
@@ -324,8 +329,48 @@ HAND_MADE = {"method"}.union(*PARAMS_USED.values())
 SPIN_LIMIT = 1e6
 
 
-def _double(lo: float, hi: float, step: float, tip: str) -> QDoubleSpinBox:
-    w = QDoubleSpinBox()
+class ThresholdBox(QDoubleSpinBox):
+    """A threshold whose value may not be known yet: then it reads "auto" (issue 43, defect 6).
+
+    An unset threshold stands for the value the map is built with, which ``verified``
+    calibrates from the recording: until that map is there, no number is shown (a
+    number shown during a run that changes after it is a wrong number). Typing or
+    stepping makes it a value of the user's again.
+    """
+
+    AUTO = "auto"
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.unknown = False
+        self.lineEdit().textEdited.connect(self._typed)
+
+    def set_unknown(self, on: bool) -> None:
+        if on != self.unknown:
+            self.unknown = on
+            self.lineEdit().setText(self.textFromValue(self.value()))
+
+    def _typed(self, _text: str) -> None:
+        self.unknown = False
+
+    def textFromValue(self, value: float) -> str:
+        return self.AUTO if self.unknown else super().textFromValue(value)
+
+    def valueFromText(self, text: str) -> float:
+        return self.value() if text == self.AUTO else super().valueFromText(text)
+
+    def validate(self, text: str, pos: int):
+        if text == self.AUTO:
+            return QValidator.Acceptable, text, pos
+        return super().validate(text, pos)
+
+    def stepBy(self, steps: int) -> None:
+        self.unknown = False
+        super().stepBy(steps)
+
+
+def _double(lo: float, hi: float, step: float, tip: str, threshold: bool = False) -> QDoubleSpinBox:
+    w = ThresholdBox() if threshold else QDoubleSpinBox()
     w.setRange(lo, hi)
     w.setSingleStep(step)
     w.setDecimals(3)

@@ -105,3 +105,34 @@ def test_a_manual_loop_keeps_its_yaw_in_the_session_and_the_graphml(qtbot, tmp_p
         w.undo_stack.setClean()
         w._extra_dirty = False
         w.shutdown()
+
+
+def test_a_neighbour_warning_keeps_both_node_fields_usable(qtbot):
+    """Issue 43, defect 4: entering a temporal neighbour showed a four-line warning that
+    squashed both node fields to a few pixels."""
+    doc = make_doc(None, [], n=30)
+    dialog = ManualLoopDialog(doc, 10)
+    qtbot.addWidget(dialog)
+    dialog.show()
+    qtbot.waitExposed(dialog)
+    dialog.b.setValue(12)
+    qtbot.wait(20)
+    assert "neighbour" in dialog.warning.text()
+    for box in (dialog.a, dialog.b):
+        assert box.height() >= box.sizeHint().height() - 2, "a node field is squashed"
+    assert dialog.warning.height() <= 3 * dialog.warning.fontMetrics().height()
+
+
+def test_the_proposal_is_never_a_pair_already_joined(qtbot):
+    """Issue 43, defect 4: the default proposal could be a pair already joined, leaving OK
+    disabled with no reason shown."""
+    doc = make_doc(None, [(2, 15, "auto")], n=30)
+    doc.topomap.node_vectors[15] = doc.topomap.node_vectors[2]   # the joined node is the most similar
+    doc._similarity = None
+    dialog = ManualLoopDialog(doc, 2)
+    qtbot.addWidget(dialog)
+    assert dialog.nodes()[1] != 15
+    ok = dialog.buttons.button(QDialogButtonBox.Ok)
+    assert ok.isEnabled()
+    dialog.b.setValue(15)
+    assert not ok.isEnabled() and dialog.warning.text() and ok.toolTip()

@@ -126,3 +126,35 @@ def test_the_default_fallback_place_is_the_xdg_state_folder(tmp_path, monkeypatc
     assert state_dir() == tmp_path / "xdg" / "panotopo" / "journals"
     monkeypatch.delenv("XDG_STATE_HOME")
     assert state_dir() == Path.home() / ".local" / "state" / "panotopo" / "journals"
+
+
+def test_opening_and_closing_without_a_record_leaves_no_file(tmp_path):
+    """Issue 43, defect 9: an empty journal and its lock were left beside every recording."""
+    rec = tmp_path / "walk.mp4"
+    with Journal.open(rec) as j:
+        assert not j.path.exists(), "no record yet: no journal file"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    with Journal.open(rec) as j:
+        j.append({"n": 1})
+        j.compact()                 # saved: nothing left to keep
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    with Journal.open(rec) as j:
+        j.append({"n": 2})          # not saved: the record stays, the lock goes
+    assert [p.name for p in tmp_path.iterdir()] == [j.path.name]
+    with Journal.open(rec) as j:
+        assert j.replay() == [{"n": 2}]
+
+
+@pytest.mark.parametrize("planted", [".journal", ".journal.lock"])
+def test_a_planted_journal_or_lock_link_is_refused_and_its_target_untouched(tmp_path, planted):
+    """Issue 43, defect 14: the journal writes only regular files it owns."""
+    from engine.journal import UnsafeJournal
+
+    victim = tmp_path / "precious.txt"
+    victim.write_text("keep me")
+    session = session_path_for(tmp_path / "walk.mp4")
+    session.with_name(session.name + planted).symlink_to(victim)
+    with pytest.raises(UnsafeJournal):
+        with Journal.open(session) as j:
+            j.append({"n": 1})
+    assert victim.read_text() == "keep me"

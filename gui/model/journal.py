@@ -18,10 +18,14 @@ from __future__ import annotations
 import copy
 from typing import Iterable, Optional
 
+from engine.errors import InputError
+
 from .loop_key import LoopKey, frames_key
 
 # Statuses that are no decision (the detection's own tiers): a record with one clears the decision.
 NO_DECISION = ("auto", "candidate")
+RECORD_STATUSES = ("candidate", "auto", "confirmed", "rejected", "manual")
+OPS = ("status", "manual", "remove", "label")
 
 
 def status(key: LoopKey, value: str) -> dict:
@@ -72,3 +76,43 @@ def replay(records: Iterable[dict], decisions: Optional[dict] = None) -> dict:
         elif op == "remove":
             manual_loops.pop(key, None)
     return {"loops": list(loops.values()), "manual": list(manual_loops.values()), "labels": list(labels.values())}
+
+
+def check_record(record) -> dict:
+    """``record`` checked like a session field (``engine.session_fields``): its op, frames,
+    status, yaw and label; InputError naming what is wrong. A record is data read back
+    from disk: it may have been damaged or edited."""
+    from engine import session_fields as f
+
+    if not isinstance(record, dict):
+        raise f._fail("record", "a mapping", record)
+    op = record.get("op")
+    if op not in OPS:
+        raise f._fail("op", f"one of {', '.join(OPS)}", op)
+    if op == "label":
+        text = record.get("label")
+        if not isinstance(text, str) or len(text) > f.LABEL_MAX:
+            raise f._fail("label", f"a text of at most {f.LABEL_MAX} characters", text)
+        return {"op": op, "frame": f._frame(record.get("frame"), "frame"), "label": text}
+    out = {"op": op, "frames": f._frames(record.get("frames"), "frames")}
+    if op == "status" or (op == "manual" and "status" in record):
+        if record.get("status") not in RECORD_STATUSES:
+            raise f._fail("status", f"one of {', '.join(RECORD_STATUSES)}", record.get("status"))
+        out["status"] = record["status"]
+    if op == "manual":
+        out["yaw"] = f._optional_number(record.get("yaw"), "yaw")
+    return out
+
+
+def replay_checked(records: Iterable, decisions: Optional[dict] = None) -> tuple[dict, int]:
+    """``replay`` of the records that pass ``check_record``; (decisions, records skipped).
+
+    The result passes the session's own checks, so a session saved from it loads again.
+    """
+    good, skipped = [], 0
+    for record in records:
+        try:
+            good.append(check_record(record))
+        except InputError:
+            skipped += 1
+    return replay(good, decisions), skipped

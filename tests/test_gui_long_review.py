@@ -1,0 +1,139 @@
+"""The app for a long review (issue 43): the review queue, the pair view after a reopen,
+the manual-loop dialog, place names and parameters per recording, in the real window."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+
+from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from PySide6.QtWidgets import QMessageBox  # noqa: E402
+
+from engine.session_fields import LABEL_MAX  # noqa: E402
+from gui.main_window import MainWindow  # noqa: E402
+from test_app_model import make_map  # noqa: E402
+from test_gui_review import _route_descriptors  # noqa: E402
+
+
+@pytest.fixture
+def told(monkeypatch):
+    shown: list = []
+    for kind in ("critical", "warning", "information"):
+        monkeypatch.setattr(QMessageBox, kind, lambda *a, k=kind, **kw: shown.append((k, a[2])) or QMessageBox.Ok)
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **kw: shown.append(("question", a[2])) or QMessageBox.No)
+    return shown
+
+
+@pytest.fixture
+def make_window(qtbot, tmp_path, told):
+    windows = []
+
+    def make(size=(1280, 720)) -> MainWindow:
+        w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), cache_root=str(tmp_path))
+        qtbot.addWidget(w)
+        w.resize(*size)
+        w.show()
+        windows.append(w)
+        return w
+
+    yield make
+    for w in windows:
+        w.undo_stack.setClean()
+        w._extra_dirty = False
+        w.shutdown()
+
+
+def open_and_run(qtbot, w, path) -> None:
+    with qtbot.waitSignal(w.mapReady, timeout=60_000):
+        assert w.open_path(str(path))
+
+
+def test_reopening_a_recording_with_a_session_fills_the_pair_view(qtbot, make_window, tmp_path):
+    """Defect 5: File > Open highlighted the restored row, but the pair view said "Select a
+    loop candidate" and Confirm/Reject were disabled."""
+    npz = _route_descriptors(tmp_path / "route.npz")
+    w = make_window()
+    w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("ours"))
+    open_and_run(qtbot, w, npz)
+    key = w.loop_table.visible_keys()[1]
+    w.loop_table.select_key(key)
+    assert w.save_session()
+    open_and_run(qtbot, w, npz)          # File > Open of the same recording
+    qtbot.wait(20)
+    assert w.loop_table.selected_key() == key
+    assert w.pair_view.key == key
+    assert w.pair_view.confirm_button.isEnabled() and w.pair_view.reject_button.isEnabled()
+
+
+def test_after_a_bulk_decision_the_current_row_stays_where_the_user_was(qtbot, make_window):
+    """Defect 8: select rows 1-7, C, Down, Up landed on row 1, not 7."""
+    w = make_window()
+    w.doc.replace_map(make_map([dict(a=i, b=i + 30, status="candidate", score=0.9 - 0.05 * i) for i in range(12)], 60))
+    view = w.loop_table.view
+    view.setFocus()
+    w.loop_table.select_key(w.loop_table.visible_keys()[0])
+    for _ in range(6):
+        qtbot.keyClick(view, Qt.Key_Down, Qt.ShiftModifier)
+    assert len(w.loop_table.selected_keys()) == 7
+    qtbot.keyClick(view, Qt.Key_C)
+    assert view.currentIndex().row() == 6
+    qtbot.keyClick(view, Qt.Key_Down)
+    qtbot.keyClick(view, Qt.Key_Up)
+    assert view.currentIndex().row() == 6
+
+
+def test_a_place_name_is_limited_where_it_is_typed(qtbot, make_window, told, tmp_path):
+    """Defect 16: a name over 1,000 characters was saved, and the session then refused to load."""
+    from engine.session import Session
+
+    npz = _route_descriptors(tmp_path / "route.npz")
+    w = make_window()
+    open_and_run(qtbot, w, npz)
+    assert w.node_panel.name.maxLength() == LABEL_MAX
+    w.node_panel.show_node(3)
+    w.node_panel.name.setFocus()
+    w.node_panel.name.setText("x" * (LABEL_MAX + 200))
+    qtbot.keyClick(w.node_panel.name, Qt.Key_Return)
+    frame = int(w.doc.node_frames()[3])
+    assert len(w.doc.label_of_frame(frame)) <= LABEL_MAX
+    w.set_label(frame, "y" * (LABEL_MAX + 1))     # any other way in is refused, with a reason
+    assert told and "at most" in told[-1][1]
+    assert w.save_session()
+    Session.load(w.doc.session_path)
+
+
+def test_parameters_do_not_carry_over_to_the_next_recording(qtbot, make_window, tmp_path, monkeypatch):
+    """Defect 3: retrieval_k 32 and auto_z 5.5 set on one recording were used on the next,
+    even after Discard."""
+    from dataclasses import replace
+
+    first = _route_descriptors(tmp_path / "first.npz")
+    second = _route_descriptors(tmp_path / "second.npz")
+    w = make_window()
+    start = w.doc.params
+    open_and_run(qtbot, w, first)
+    changed = replace(w.doc.params, retrieval_k=32, auto_z=5.5)
+    w._params_edited("retrieval_k", changed)
+    assert w.doc.params.retrieval_k == 32
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.Discard)
+    open_and_run(qtbot, w, second)
+    assert w.doc.params == start
+    assert w.params_panel.params() == start
+
+
+def test_the_node_threshold_shows_no_number_the_run_will_contradict(qtbot, make_window, tmp_path):
+    """Defect 6: the node-similarity field read 0.790 during a run and 0.725 after it."""
+    npz = _route_descriptors(tmp_path / "route.npz")
+    w = make_window()
+    w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("verified"))
+    shown = []
+    w.runner.started.connect(lambda: shown.append(w.params_panel.node_sim_th.text()))
+    open_and_run(qtbot, w, npz)
+    after = w.params_panel.node_sim_th.text()
+    open_and_run(qtbot, w, npz)
+    again = w.params_panel.node_sim_th.text()
+    during = set(shown)
+    assert after == again
+    assert during <= {after, "auto"}, (during, after)
