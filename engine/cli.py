@@ -102,6 +102,8 @@ def _describe_settings(args: argparse.Namespace, shift: bool):
 
 
 def _report_skipped(args: argparse.Namespace, descs) -> None:
+    for note in getattr(descs, "notes", ()):   # what loading a descriptors file mended (rows normalised)
+        print(f"panotopo: {note}", file=sys.stderr)
     for note in descs.meta.get("reader_notes") or []:   # e.g. a video cut short, read as far as it goes
         print(f"panotopo: {note}", file=sys.stderr)
     skipped = descs.meta.get("skipped_frames") or []
