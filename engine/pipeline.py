@@ -117,6 +117,8 @@ def describe(
         reading = {"interval": settings.interval, "topic": settings.topic}
         if settings.projection or settings.sampling != "interval":   # keys of earlier runs unchanged
             reading.update(projection=settings.projection, sampling=settings.sampling)
+        if settings.shift and (path.is_dir() or path.suffix.lower() in (".bag", ".db3", ".mcap")):
+            reading["headings"] = 1   # bags and photo folders may now be shifted by their headings
         key = cache_key(path, reading,
                         {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
                          "features": FEATURES_VERSION, "work_width": work_width(model), **model.settings()})
@@ -144,16 +146,21 @@ def describe_source(source: FrameSource, settings: DescribeSettings, model, wher
 
     expected = source.expected_samples(settings.interval)
     check_describe_memory(expected, model, where)
+    headings = source.headings() if settings.shift else None   # None: the shift from the image
     skipped: list[int] = []
     frames = prefetched(checked_frames(source, settings.interval, settings.skip_bad_frames, skipped,
                                        max_width=work_width(model)))
     try:
         with cpu_threads(cores_left(source.reader_threads)):
             result = describe_frames(frames, expected, settings, model=model, source=where,
-                                     progress=progress, cancel=cancel)
+                                     progress=progress, cancel=cancel, headings=headings)
     finally:
         frames.close()   # on cancel or error too: reading stops before the caller closes the source
     result.meta["skipped_frames"] = skipped
+    note = getattr(source, "heading_note", "")
+    result.meta["shift_from"] = ("heading" if headings is not None else "image") if settings.shift else "none"
+    if note:
+        result.meta["heading_note"] = note
     projection = getattr(source, "projection", None)
     result.meta["projection"] = projection.as_meta() if projection is not None else {"name": "equirect"}
     result.meta["sampling"] = settings.sampling
@@ -171,9 +178,14 @@ def describe_frames(
     source: str = "",
     progress: Optional[Progress] = None,
     cancel: Optional[CancelToken] = None,
+    headings: Optional[np.ndarray] = None,
 ) -> Descriptors:
     """Descriptors of already sampled ``frames`` (the core of ``describe``; also used on
     in-memory recordings by benchmarks and tests).
+
+    The panorama shift of each frame comes from ``headings[frame.index]`` (degrees clockwise
+    of the image centre, ``FrameSource.headings``) when given, else from the image
+    (``engine.shift.canonical_shift``); none when ``settings.shift`` is off.
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
     (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
@@ -182,7 +194,7 @@ def describe_frames(
     """
     from .colour import colour_histogram
     from .features import FeatureTable, extract
-    from .shift import apply_shift, canonical_shift
+    from .shift import apply_shift, canonical_shift, shift_from_heading
     from .verify import column_features
 
     if model is None:
@@ -201,7 +213,12 @@ def describe_frames(
         for frame in frames:
             check(cancel)
             work = working_copy(frame.rgb, columns_wide)
-            s_work = canonical_shift(work) if settings.shift else 0
+            if not settings.shift:
+                s_work = 0
+            elif headings is not None:
+                s_work = shift_from_heading(work.shape[1], float(headings[frame.index]))
+            else:
+                s_work = canonical_shift(work)
             stamps.append(frame.stamp)
             indices.append(frame.index)
             # The shift is stored in columns of the source frame (the contract).

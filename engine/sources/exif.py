@@ -8,7 +8,8 @@
   with ``GPSLatitudeRef`` N/S and ``GPSLongitudeRef`` E/W, ``GPSAltitude`` (metres,
   ``GPSAltitudeRef`` 1 = below sea level) and ``GPSImgDirection`` (heading of the image
   centre, degrees clockwise from north; ``GPSImgDirectionRef`` T true or M magnetic);
-- XMP ``GPano:ProjectionType`` ("equirectangular" for a full panorama).
+- XMP ``GPano:ProjectionType`` ("equirectangular" for a full panorama) and
+  ``GPano:PoseHeadingDegrees`` (heading of the image centre, degrees clockwise from north).
 
 ``read_photo_tags`` never raises for bad tags: a malformed field is left out and a
 one-line warning says which and why (the photo itself is still usable).
@@ -34,6 +35,7 @@ GPS_ALTITUDE_REF, GPS_ALTITUDE = 5, 6
 GPS_IMG_DIRECTION = 17
 
 _PROJECTION = re.compile(rb"GPano:ProjectionType\s*(?:=\s*[\"']([^\"']*)[\"']|>\s*([^<\s]*)\s*<)")
+_POSE_HEADING = re.compile(rb"GPano:PoseHeadingDegrees\s*(?:=\s*[\"']([^\"']*)[\"']|>\s*([^<\s]*)\s*<)")
 
 
 @dataclass(frozen=True)
@@ -46,11 +48,19 @@ class PhotoTags:
     altitude: Optional[float] = None    # metres above sea level
     direction: Optional[float] = None   # heading, degrees clockwise from north
     projection: Optional[str] = None    # XMP GPano:ProjectionType
+    pose_heading: Optional[float] = None  # XMP GPano:PoseHeadingDegrees, degrees clockwise from north
     warnings: tuple[str, ...] = ()
 
     @property
     def has_fix(self) -> bool:
         return self.latitude is not None and self.longitude is not None
+
+    @property
+    def heading(self) -> Optional[float]:
+        """Heading of the image centre: GPSImgDirection, else GPano's PoseHeadingDegrees; None
+        when the photo has neither. (GoPro MAX writes PoseHeadingDegrees 0.0 on every photo, a
+        placeholder beside its GPSImgDirection, so GPSImgDirection comes first.)"""
+        return self.direction if self.direction is not None else self.pose_heading
 
 
 def read_photo_tags(path: str | Path) -> PhotoTags:
@@ -81,6 +91,7 @@ def read_photo_tags(path: str | Path) -> PhotoTags:
         fields["altitude"] = _field(path, "GPSAltitude", warnings, _altitude, gps)
         fields["direction"] = _field(path, "GPSImgDirection", warnings, _direction, gps)
     fields["projection"] = _field(path, "GPano:ProjectionType", warnings, _projection, xmp)
+    fields["pose_heading"] = _field(path, "GPano:PoseHeadingDegrees", warnings, _pose_heading, xmp)
     return PhotoTags(**fields, warnings=tuple(warnings))
 
 
@@ -179,3 +190,17 @@ def _projection(xmp: Any) -> Optional[str]:
     if m is None:
         return None
     return (m.group(1) or m.group(2) or b"").decode("utf-8", errors="replace") or None
+
+
+def _pose_heading(xmp: Any) -> Optional[float]:
+    if not xmp:
+        return None
+    if isinstance(xmp, str):
+        xmp = xmp.encode("utf-8", errors="replace")
+    m = _POSE_HEADING.search(xmp)
+    if m is None:
+        return None
+    degrees = _number((m.group(1) or m.group(2) or b"").decode("ascii", errors="replace"))
+    if not -360.0 <= degrees <= 360.0:
+        raise ValueError(f"{degrees} degrees is outside -360..360")
+    return degrees % 360.0

@@ -31,7 +31,8 @@ Positions: when EVERY photo has an EXIF GPS fix, ``FolderSource.poses`` holds th
 ``engine.poses.Poses`` on the frames' stamps: metres east (x) and north (y) of the first
 photo's fix (``geo.local_metres``), with yaw from GPSImgDirection when every photo has
 one. Otherwise ``poses`` is None (no partial tracks). Malformed tags are skipped with a
-line in ``FolderSource.warnings``. ``panotopo map`` stores these positions as node ``x``,
+line in ``FolderSource.warnings``. Headings: when every photo says which way its image
+centre looked (``FolderSource.headings()``, for the panorama shift). ``panotopo map`` stores these positions as node ``x``,
 ``y`` unless ``--poses`` is given, e.g. for five GoPro MAX photos walking 9 m north::
 
     panotopo map ../shared/data/real/panoramax-gopromax -o gopro.graphml
@@ -134,6 +135,8 @@ class FolderLayout:
     stamps: np.ndarray
     poses: Optional[Poses]
     warnings: list[str]
+    headings: Optional[np.ndarray] = None   # degrees clockwise of the image centres (photo_headings)
+    heading_note: str = ""
 
 
 def folder_layout(folder: Path, interval: float = 1.0) -> FolderLayout:
@@ -162,7 +165,21 @@ def folder_layout(folder: Path, interval: float = 1.0) -> FolderLayout:
     poses = gps_poses(tags, stamps)
     if poses is None and any(t.has_fix for t in tags):
         warnings.append(f"{folder}: not every image has a GPS fix: no positions")
-    return FolderLayout(files, stamps, poses, warnings)
+    headings, note = photo_headings(tags)
+    return FolderLayout(files, stamps, poses, warnings, headings, note)
+
+
+def photo_headings(tags: list[PhotoTags]) -> tuple[Optional[np.ndarray], str]:
+    """(headings in degrees clockwise, where from) when every photo has one (``PhotoTags.heading``);
+    (None, "") otherwise, and when several photos all say the very same heading: GoPro MAX
+    writes GPano PoseHeadingDegrees 0.0 on every photo, a placeholder, not a direction."""
+    if not tags or any(t.heading is None for t in tags):
+        return None, ""
+    headings = np.array([t.heading for t in tags], dtype=np.float64)
+    if headings.size > 1 and np.all(headings == headings[0]):
+        return None, ""
+    exif = all(t.direction is not None for t in tags)
+    return headings, "EXIF GPSImgDirection" if exif else "EXIF GPSImgDirection / XMP GPano:PoseHeadingDegrees"
 
 
 class FolderSource(IndexedSource):
@@ -177,8 +194,14 @@ class FolderSource(IndexedSource):
         self._stamps = layout.stamps
         self.poses: Optional[Poses] = layout.poses
         self.warnings: list[str] = layout.warnings
+        self._headings = layout.headings
+        self.heading_note = layout.heading_note
         first = self._read(0)
         self._resolution = (first.shape[1], first.shape[0])
+
+    def headings(self) -> Optional[np.ndarray]:
+        """Headings of the photos (EXIF GPSImgDirection / XMP PoseHeadingDegrees), or None."""
+        return None if self._headings is None else self._headings.copy()
 
     def _read(self, index: int) -> np.ndarray:
         file = self.files[index]

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..poses import Poses
+from .orientation import quaternion_yaw
 from .rosbag import POSE_TYPES, _one_line, choose_topic, message_stamp, open_bag
 
 
@@ -55,7 +56,7 @@ def read_poses_csv(path: Path) -> Poses:
     if not np.all(np.isfinite(table)):
         raise InputError(f"{path}: contains non-finite values")
     return _sorted_poses(table[:, 0], table[:, 1], table[:, 2],
-                         table[:, 3] if table.shape[1] == 4 else None)
+                         table[:, 3] if table.shape[1] == 4 else None, where=str(path))
 
 
 def read_poses_bag(path: Path, topic: Optional[str] = None) -> Poses:
@@ -78,7 +79,8 @@ def read_poses_bag(path: Path, topic: Optional[str] = None) -> Poses:
         reader.close()
     if not t:
         raise InputError(f"{path}: pose topic {topic} has no messages")
-    return _sorted_poses(np.array(t), np.array(x), np.array(y), np.array(yaw))
+    return _sorted_poses(np.array(t, np.float64), np.array(x, np.float64), np.array(y, np.float64),
+                         np.array(yaw, np.float64), where=f"{path} ({topic})")
 
 
 def _pose_of(msg: Any, msgtype: str) -> Any:
@@ -87,13 +89,34 @@ def _pose_of(msg: Any, msgtype: str) -> Any:
     return msg.pose.pose  # Odometry and PoseWithCovarianceStamped
 
 
-def quaternion_yaw(q: Any) -> float:
-    """Rotation about z (radians) of a unit quaternion."""
-    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+# The largest position coordinate accepted, in metres: ten times the Earth's radius, beyond
+# any map frame, UTM or Earth-centred coordinate; larger values are a unit or scale error
+# (and squared distances of 1e300 overflow to infinity: every pair "far", silently).
+MAX_POSE_COORD_M = 6.4e7
+# The largest time accepted, in seconds: about 3,000 years of ROS (Unix) time; larger
+# stamps are nanoseconds or garbage, and a float64 second there is coarser than 1 ms.
+MAX_POSE_TIME_S = 1e11
+
+
+def _check_values(where: str, t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: Optional[np.ndarray]) -> None:
+    """Refuse poses that are not finite, or whose positions or times are out of range."""
+    for name, values in (("t", t), ("x", x), ("y", y), ("yaw", yaw)):
+        if values is None:
+            continue
+        bad = np.flatnonzero(~np.isfinite(values))
+        if bad.size:
+            raise InputError(f"{where}: pose {int(bad[0]) + 1} has a non-finite {name} ({values[bad[0]]})")
+    for name, values, limit, unit in (("x", x, MAX_POSE_COORD_M, "m"), ("y", y, MAX_POSE_COORD_M, "m"),
+                                      ("t", t, MAX_POSE_TIME_S, "s")):
+        bad = np.flatnonzero(np.abs(values) > limit)
+        if bad.size:
+            raise InputError(f"{where}: pose {int(bad[0]) + 1} has {name} = {values[bad[0]]:.6g} {unit}, beyond "
+                             f"{limit:g} {unit}; are the poses in metres and seconds?")
 
 
 def _sorted_poses(t: np.ndarray, x: np.ndarray, y: np.ndarray,
-                  yaw: Optional[np.ndarray]) -> Poses:
+                  yaw: Optional[np.ndarray], where: str = "poses") -> Poses:
+    _check_values(where, t, x, y, yaw)
     # Interpolation needs increasing times; recorders sometimes write out of order.
     order = np.argsort(t, kind="stable")
     return Poses(t=t[order].astype(np.float64), x=x[order].astype(np.float64),

@@ -33,13 +33,9 @@ from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
 from ..validate import frame_size, image_file_size
 from .bag_reader import BagFormatError, BagReader, open_reader
+from .orientation import POSE_TYPES, headings_at, orientation_topics, read_yaw
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-POSE_TYPES = (
-    "nav_msgs/msg/Odometry",
-    "geometry_msgs/msg/PoseStamped",
-    "geometry_msgs/msg/PoseWithCovarianceStamped",
-)
 ROS2_STORAGE_SUFFIXES = (".db3", ".mcap")
 
 
@@ -248,10 +244,18 @@ def recovery_hint(path: Path) -> str:
 
 
 class BagSource(IndexedSource):
-    """Frames of one image topic of a ROS1 or ROS2 bag."""
+    """Frames of one image topic of a ROS1 or ROS2 bag.
 
-    def __init__(self, path: str | Path, topic: Optional[str] = None) -> None:
+    ``headings()`` come from the bag's orientation topic (``orientation.py``): the one
+    Odometry / PoseStamped / PoseWithCovarianceStamped / Imu topic, or ``heading_topic``
+    when given; ``heading_note`` says which, or why none.
+    """
+
+    def __init__(self, path: str | Path, topic: Optional[str] = None,
+                 heading_topic: Optional[str] = None) -> None:
         self.path = Path(path)
+        self._heading_topic = heading_topic
+        self._headings: Optional[tuple] = None   # (array or None,) once read
         self._reader = open_bag(self.path)
         self._lock = threading.Lock()  # frame_at may be called from several threads
         try:
@@ -264,6 +268,41 @@ class BagSource(IndexedSource):
             raise
         h, w = first.rgb.shape[:2]
         self._resolution = (w, h)
+
+    def headings(self) -> Optional[np.ndarray]:
+        """Headings (degrees clockwise) of the frames from the bag's orientation topic, or None."""
+        with self._lock:
+            if self._headings is None:
+                self._headings = (self._read_headings(),)
+            return self._headings[0]
+
+    def _read_headings(self) -> Optional[np.ndarray]:
+        reader = open_bag(self.path)
+        try:
+            topics = orientation_topics(reader)
+            topic = self._heading_topic
+            if topic is not None and topic not in topics:
+                raise InputError(f"{self.path}: no orientation topic {topic!r}; orientation topics: "
+                                 f"{', '.join(topics) or 'none'}")
+            if topic is None:
+                if len(topics) != 1:
+                    self.heading_note = (f"several orientation topics ({', '.join(topics)}), none chosen"
+                                         if topics else "")
+                    return None
+                topic = topics[0]
+            try:
+                t, yaw, msgtype = read_yaw(reader, topic)
+            except Exception as err:  # the images are fine: the shift falls back to the image
+                self.heading_note = f"{topic} unreadable ({_one_line(err)})"
+                return None
+        finally:
+            reader.close()
+        found = headings_at(t, yaw, self._stamps)
+        if found is None:
+            self.heading_note = f"{topic} ({msgtype}) does not cover every frame"
+            return None
+        self.heading_note = f"{topic} ({msgtype})"
+        return found
 
     def _index_messages(self) -> None:
         """One pass over the topic: log time, rank among equal log times, stamp."""

@@ -1,0 +1,94 @@
+"""Which way the camera looked, from a bag's own orientation topic: headings for the shift.
+
+A bag's ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped``,
+``geometry_msgs/PoseWithCovarianceStamped`` or ``sensor_msgs/Imu`` topic (either spelling of
+the type) gives the yaw of the robot; the camera, mounted on it, turns with it. The topic is
+used only when it is the one such topic of the bag (several: the caller names one, or the
+image decides the shift); an Imu message whose ``orientation_covariance[0]`` is -1 (the
+driver's "no orientation") or whose quaternion is zero is left out.
+
+Headings come out as ``engine.frames.FrameSource.headings`` wants them: degrees clockwise
+(``-yaw``), at the frame stamps, interpolated on the unwrapped yaw. A frame more than
+``MAX_GAP_S`` from the nearest orientation sample, or outside the topic's time span by more
+than that, has no trustworthy heading, and then no frame gets one: a shift partly from the
+world and partly from the image would be the same for no two frames.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import numpy as np
+
+POSE_TYPES = (   # engine.sources.rosbag.POSE_TYPES is this
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/PoseStamped",
+    "geometry_msgs/msg/PoseWithCovarianceStamped",
+)
+IMU_TYPE = "sensor_msgs/msg/Imu"
+ORIENTATION_TYPES = POSE_TYPES + (IMU_TYPE,)
+# Longest time (s) between a frame and an orientation sample it is interpolated from.
+MAX_GAP_S = 0.5
+
+
+def orientation_topics(reader: Any) -> list[str]:
+    """Topics of the bag whose messages carry an orientation, by name."""
+    return sorted({c.topic for c in reader.connections if c.msgtype in ORIENTATION_TYPES})
+
+
+def quaternion_yaw(q: Any) -> float:
+    """Rotation about z (radians, counter-clockwise) of a unit quaternion (atan2 of the
+    ZYX Euler formula: any positive scale of the quaternion gives the same angle)."""
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def _orientation(msg: Any, msgtype: str) -> Optional[Any]:
+    if msgtype == IMU_TYPE:
+        cov = np.asarray(msg.orientation_covariance, dtype=np.float64).reshape(-1)
+        if cov.size and cov[0] == -1.0:
+            return None
+        q = msg.orientation
+    elif msgtype == "geometry_msgs/msg/PoseStamped":
+        q = msg.pose.orientation
+    else:  # Odometry, PoseWithCovarianceStamped
+        q = msg.pose.pose.orientation
+    norm = float(np.sqrt(q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w))
+    return q if np.isfinite(norm) and norm > 1e-6 else None
+
+
+def read_yaw(reader: Any, topic: str) -> tuple[np.ndarray, np.ndarray, str]:
+    """(stamps s, yaw rad, message type) of ``topic``: header stamps (log time when zero),
+    sorted by stamp; messages without an orientation are left out."""
+    conns = [c for c in reader.connections if c.topic == topic and c.msgtype in ORIENTATION_TYPES]
+    t, yaw = [], []
+    for conn, log_ns, raw in reader.messages(connections=conns):
+        msg = reader.deserialize(raw, conn.msgtype)
+        q = _orientation(msg, conn.msgtype)
+        if q is None:
+            continue
+        ns = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+        t.append((ns or log_ns) * 1e-9)
+        yaw.append(quaternion_yaw(q))
+    order = np.argsort(np.asarray(t, dtype=np.float64), kind="stable")
+    return (np.asarray(t, dtype=np.float64)[order], np.asarray(yaw, dtype=np.float64)[order],
+            conns[0].msgtype if conns else "")
+
+
+def headings_at(t: np.ndarray, yaw: np.ndarray, stamps: np.ndarray,
+                max_gap: float = MAX_GAP_S) -> Optional[np.ndarray]:
+    """Compass-style headings (degrees clockwise, [0, 360)) at ``stamps`` from yaw samples
+    (radians counter-clockwise) at ``t``, interpolated on the unwrapped yaw; None unless every
+    stamp is within ``max_gap`` s of its nearest sample."""
+    t = np.asarray(t, dtype=np.float64)
+    yaw = np.asarray(yaw, dtype=np.float64)
+    stamps = np.asarray(stamps, dtype=np.float64)
+    if t.size == 0 or stamps.size == 0 or not np.all(np.isfinite(yaw)):
+        return None
+    keep = np.concatenate([[True], np.diff(t) > 0])   # np.interp needs increasing times
+    t, yaw = t[keep], np.unwrap(yaw[keep])
+    i = np.searchsorted(t, stamps)
+    left, right = t[np.clip(i - 1, 0, t.size - 1)], t[np.clip(i, 0, t.size - 1)]
+    nearest = np.minimum(np.abs(stamps - left), np.abs(right - stamps))
+    if np.any(nearest > max_gap):
+        return None
+    return (-np.degrees(np.interp(stamps, t, yaw))) % 360.0
