@@ -206,3 +206,42 @@ def test_truncated_or_corrupt_video_is_one_clear_line(clips, tmp_path):
                 list(src.frames(1.0))
         message = str(err.value)
         assert name in message and "\n" not in message
+
+
+def test_keyframes_only_delivers_every_key_frame_decoding_nothing_else(clips):
+    with VideoSource(clips["gop1s"], keyframes_only=True) as src:
+        for interval in (1.0, 0.3):                       # the interval plays no part
+            got = delivered(src, interval)
+            stats = src.sampler.last_stats
+            assert stats.mode == "all-keyframes"
+            assert [f.index for f in got] == list(range(0, N, FPS))   # the clip's key frames
+            assert [frame_number(f.rgb) for f in got] == [f.index for f in got]
+            assert stats.decoded == len(got)
+        assert src.expected_samples(1.0) == len(got) == len(src.sample_indices(1.0))
+    with VideoSource(clips["gop10s"], keyframes_only=True) as src:   # sparse key frames: few samples
+        got = delivered(src, 1.0)
+        assert [f.index for f in got] == [0, 10 * FPS]
+        assert src.sampler.last_stats.decoded == 2
+
+
+def test_keyframes_sampling_through_describe_and_the_command_line(clips, tmp_path, capsys):
+    import json
+
+    from engine.cli import main
+
+    out = tmp_path / "k.npz"
+    code = main(["describe", str(clips["gop1s"]), "-o", str(out), "--no-cache", "--input-height", "32", "-q",
+                 "--interval", "keyframes"])
+    assert code == 0, capsys.readouterr().err
+    with np.load(out) as z:
+        assert z["frames"].tolist() == list(range(0, N, FPS))
+        assert json.loads(str(z["meta"]))["sampling"] == "keyframes"
+    with pytest.raises(SystemExit) as exit_:                 # argparse: one line, status 2
+        main(["describe", str(clips["gop1s"]), "-o", str(tmp_path / "x.npz"), "--interval", "often"])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert exit_.value.code == 2 and len(lines) == 1 and "keyframes" in lines[0]
+    folder = tmp_path / "photos"                            # only videos have key frames
+    folder.mkdir()
+    code = main(["describe", str(folder), "-o", str(tmp_path / "x.npz"), "--no-cache", "-q", "--interval", "keyframes"])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "key frames" in lines[0]
