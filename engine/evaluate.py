@@ -174,9 +174,14 @@ def _events(pi: np.ndarray, pj: np.ndarray, m: int) -> np.ndarray:
 
 def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1.0,
              neighbor_node_num: Optional[int] = None, include_candidates: bool = False) -> Evaluation:
-    """Count TP/FP/TN/FN of the map's loop arcs against ground truth (see module doc)."""
+    """Count TP/FP/TN/FN of the map's loop arcs against ground truth (see module doc).
+
+    A map without nodes is refused (InputError): it has nothing to evaluate, and its
+    four zeros read like a result."""
     if not dist_th >= 0 or dist_th == float("inf"):  # NaN compares false
         raise InputError(f"distance threshold must be a finite number >= 0, got {dist_th}")
+    if topomap.graph.number_of_nodes() == 0:
+        raise InputError("the map has no nodes: there is nothing to evaluate")
     if neighbor_node_num is None:
         neighbor_node_num = int(topomap.meta.get("neighbor_node_num", 0))
     nn = int(neighbor_node_num)

@@ -6,7 +6,8 @@
   more data than the member holds (numpy allocates the announced shape first).
 * ``check_contents`` (after loading): ``meta`` is a JSON object whose known keys have
   their types (``frame_width`` an integer...), and stamps and descriptors are finite
-  (NaN descriptors made a one-node map, silently).
+  (NaN descriptors made a one-node map, silently); no frame is described twice and the
+  stamps never run backwards (rows are a recording in order: equal stamps are allowed).
 """
 
 from __future__ import annotations
@@ -94,3 +95,14 @@ def check_contents(descs, path: Path) -> None:
             raise InputError(f"{path}: {name} of row {row} are not finite numbers (NaN or infinity)")
     if descs.frames.size and int(descs.frames.min()) < 0:
         raise InputError(f"{path}: frame numbers must be >= 0")
+    order = np.argsort(descs.frames, kind="stable")
+    same = np.flatnonzero(np.diff(descs.frames[order]) == 0)
+    if same.size:
+        i, j = sorted((int(order[same[0]]), int(order[same[0] + 1])))
+        raise InputError(f"{path}: frame {int(descs.frames[i])} is described twice (rows {i} and {j}); "
+                         f"each row must be its own frame")
+    back = np.flatnonzero(np.diff(descs.stamps) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise InputError(f"{path}: stamps run backwards at row {k} ({descs.stamps[k]:.6g} s after "
+                         f"{descs.stamps[k - 1]:.6g} s); rows must be in recording order")

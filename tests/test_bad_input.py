@@ -99,7 +99,31 @@ def data(tmp_path_factory) -> Path:
     (d / "ok.csv").write_text("t,x,y\n" + "".join(f"{k},{k},0\n" for k in range(12)))
     _graphml(d / "dup.graphml", [0, 1, 1, 3])
     _graphml(d / "neg.graphml", [0, -1, 2, 3])
+    # Issue 43, item 18: files that were accepted with nonsense, exit 0.
+    _npz_arrays(d / "complex.npz", descriptors=(rng.normal(size=(12, 16)) * (1 + 1j)).astype(np.complex64))
+    _npz_arrays(d / "bool.npz", descriptors=rng.random((12, 16)) > 0.5)
+    _npz_arrays(d / "dup_frames.npz", frames=np.array([0, 1, 2, 3, 4, 5, 5, 6, 7, 8, 9, 10], np.int64))
+    _npz_arrays(d / "backwards.npz", stamps=np.array([0, 1, 2, 3, 4, 5, 2.5, 7, 8, 9, 10, 11], np.float64))
+    _npz_arrays(d / "colours_width.npz", colours=rng.random((12, 100)).astype(np.float16))
+    zero = rng.normal(size=(12, 16)).astype(np.float32)
+    zero[4] = 0
+    _npz_arrays(d / "zero_row.npz", descriptors=zero)
+    (d / "huge.csv").write_text("t,x,y\n" + "".join(f"{k},{k * 1e300},0\n" for k in range(12)))
+    (d / "ns.csv").write_text("t,x,y\n" + "".join(f"{1.7e18 + k * 1e9},{k},0\n" for k in range(12)))
+    nx.write_graphml(nx.Graph(generator="panotopo 0.1.0", neighbor_node_num=1), d / "empty.graphml")
+    _graphml(d / "four.graphml", [0, 1, 2, 3])
     return d
+
+
+def _npz_arrays(path: Path, n: int = 12, d: int = 16, **arrays) -> Path:
+    """A descriptors file written as is (no normalising), ``arrays`` replacing or adding keys."""
+    rng = np.random.default_rng(5)
+    v = rng.normal(size=(n, d)).astype(np.float32)
+    base = dict(stamps=np.arange(n, dtype=np.float64), frames=np.arange(n, dtype=np.int64),
+                shifts=np.zeros(n, np.int64), descriptors=v / np.linalg.norm(v, axis=1, keepdims=True),
+                meta=np.array(json.dumps({"descriptor": "effnet-vlad", "shift": True, "interval": 1.0})))
+    np.savez(path, **{**base, **arrays})
+    return path
 
 
 def run(data: Path, *args, limit_memory: bool = False) -> subprocess.CompletedProcess:
@@ -148,6 +172,16 @@ MAP = [
     (["bomb.npz"], "GiB"),
     (["good.npz", "--poses", "far.csv"], "clock"),
     (["good.npz", "--poses", "one.csv"], "at least two"),
+    (["complex.npz"], "complex numbers"),
+    (["bool.npz"], "true/false"),
+    (["dup_frames.npz"], "frame 5 is described twice"),
+    (["backwards.npz"], "stamps run backwards at row 6"),
+    (["colours_width.npz"], "'colours' must be 12 x 512"),
+    (["zero_row.npz"], "row 4 is all zeros"),
+    (["good.npz", "--poses", "huge.csv"], "metres"),
+    (["good.npz", "--poses", "ns.csv"], "seconds"),
+    (["good.npz", "--plot", "out.graphml"], "the same file as --output"),
+    (["good.npz", "--plot", "./out.graphml"], "the same file as --output"),
 ]
 
 
@@ -194,6 +228,9 @@ EVAL = [
     (["good.npz", "--poses", "ok.csv"], "GraphML"),
     (["dup.graphml", "--poses", "ok.csv", "--dist-th", "nan"], "--dist-th"),
     (["dup.graphml", "--poses", "ok.csv", "--dist-th", "-1"], "--dist-th"),
+    (["empty.graphml", "--poses", "ok.csv"], "no nodes"),
+    (["four.graphml", "--poses", "huge.csv"], "metres"),
+    (["four.graphml", "--poses", "ok.csv", "--plot", "four.graphml"], "same file"),
 ]
 
 

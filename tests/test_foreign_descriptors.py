@@ -47,3 +47,36 @@ def test_cli_maps_a_foreign_npz(foreign, tmp_path, capsys):
     code = main(["map", str(path), "-o", str(out), "--method", "ours", "-q"])
     assert code == 0, capsys.readouterr().err
     assert out.is_file() and "<graphml" in out.read_text()[:2000]
+
+
+def test_integer_descriptors_are_normalised_and_the_user_is_told(foreign, tmp_path, capsys):
+    """Issue 43 item 18: integer rows (another tool's quantised output) were used unnormalised,
+    so the cosine thresholds saw lengths, not directions. Read as their directions, they give
+    the map the same directions as unit floats give, and one line says so."""
+    path, _ = foreign
+    floats = Descriptors.load(path)
+    ints = np.round(floats.vectors * 1000).astype(np.int32)
+    raw = tmp_path / "ints.npz"
+    np.savez(raw, stamps=floats.stamps, frames=floats.frames, shifts=floats.shifts, descriptors=ints,
+             meta=np.array('{"descriptor": "my-own-vpr"}'))
+    units = ints / np.linalg.norm(ints.astype(np.float64), axis=1, keepdims=True)
+    unit_path = tmp_path / "units.npz"
+    Descriptors(stamps=floats.stamps, frames=floats.frames, shifts=floats.shifts,
+                vectors=units.astype(np.float32), meta={"descriptor": "my-own-vpr"}).save(unit_path)
+
+    loaded = Descriptors.load(raw)
+    assert np.allclose(np.linalg.norm(loaded.vectors, axis=1), 1.0, atol=1e-5)
+    assert len(loaded.notes) == 1 and "normalised" in loaded.notes[0]
+    assert Descriptors.load(unit_path).notes == []  # unit rows are left as they are, silently
+
+    maps = {}
+    for name, src in (("ints", raw), ("units", unit_path)):
+        out = tmp_path / f"{name}.graphml"
+        code = main(["map", str(src), "-o", str(out), "--method", "ours", "-q"])
+        err = capsys.readouterr().err
+        assert code == 0, err
+        maps[name] = (out.read_text().count("<node "), err)
+    assert maps["ints"][0] == maps["units"][0]
+    lines = maps["ints"][1].strip().splitlines()
+    assert len(lines) == 1 and "integers" in lines[0] and "normalised" in lines[0]
+    assert maps["units"][1].strip() == ""

@@ -45,6 +45,9 @@ class Descriptors:
     # Derived results kept in memory (retrieval, background statistics, geometry per frame
     # pair), so that re-mapping after a threshold change is cheap; never saved.
     cache: dict = field(default_factory=dict, repr=False, compare=False)
+    # What loading had to mend (one line each, e.g. rows normalised), for the caller to
+    # tell the user; never saved.
+    notes: list = field(default_factory=list, repr=False, compare=False)
 
     def __len__(self) -> int:
         return int(self.vectors.shape[0])
@@ -83,14 +86,18 @@ class Descriptors:
                 missing = {"stamps", "frames", "shifts", "descriptors", "meta"} - set(z.files)
                 if missing:
                     raise InputError(f"{path}: not a panotopo descriptors file (missing {', '.join(sorted(missing))})")
+                raw = {k: z[k] for k in ("stamps", "frames", "shifts", "descriptors", "columns", "colours")
+                       if k in z.files}
+                for key, arr in raw.items():
+                    _check_kind(path, key, arr)
                 d = cls(
-                    stamps=z["stamps"].astype(np.float64),
-                    frames=z["frames"].astype(np.int64),
-                    shifts=z["shifts"].astype(np.int64),
-                    vectors=z["descriptors"].astype(np.float32),
+                    stamps=raw["stamps"].astype(np.float64),
+                    frames=raw["frames"].astype(np.int64),
+                    shifts=raw["shifts"].astype(np.int64),
+                    vectors=raw["descriptors"].astype(np.float32),
                     meta=json.loads(str(z["meta"])),
-                    columns=z["columns"].astype(np.float16) if "columns" in z.files else None,
-                    colours=z["colours"].astype(np.float16) if "colours" in z.files else None,
+                    columns=raw["columns"].astype(np.float16) if "columns" in raw else None,
+                    colours=raw["colours"].astype(np.float16) if "colours" in raw else None,
                 )
                 try:
                     d.features = FeatureTable.from_arrays({k: z[k] for k in z.files if k.startswith("feat_")},
@@ -108,10 +115,57 @@ class Descriptors:
             raise InputError(f"{path}: descriptors file has inconsistent array lengths")
         if d.columns is not None and (d.columns.ndim != 3 or d.columns.shape[0] != n):
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
-        if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape[0] != n):
-            raise InputError(f"{path}: descriptors file has colour histograms of the wrong shape")
+        if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape != (n, COLOUR_BINS)):
+            raise InputError(f"{path}: 'colours' must be {n} x {COLOUR_BINS} colour histograms, "
+                             f"got shape {' x '.join(map(str, d.colours.shape))}")
         check_contents(d, path)
+        d.notes.extend(_unit_rows(d, path, integer=raw["descriptors"].dtype.kind in "iu"))
         return d
+
+
+# The width of the optional 'colours' arrays: engine.colour's Lab histogram, 8 bins per
+# channel (the .npz contract's (n, 512)).
+COLOUR_BINS = 512
+# A row is taken as L2-normalised when its length is within this of 1: float16 caches and
+# other tools' rounding stay well inside it; a row outside it was never normalised.
+UNIT_NORM_TOLERANCE = 1e-3
+# The numeric kinds each array of the file may hold (numpy dtype kinds): real numbers for
+# all; integers are whole numbers (read as floats) or, for descriptors, directions that
+# are normalised when read. Complex numbers, booleans, text and dates are refused.
+_KINDS = {"stamps": "fiu", "frames": "iu", "shifts": "iu", "descriptors": "fiu", "columns": "fiu",
+          "colours": "fiu"}
+
+
+def _check_kind(path: Path, key: str, arr: np.ndarray) -> None:
+    """Refuse an array whose numbers are not of a kind ``key`` may hold (a cast would
+    silently drop the imaginary part of complex numbers, or turn text into an error)."""
+    if arr.dtype.kind not in _KINDS[key]:
+        kind = {"c": "complex numbers", "b": "true/false values", "U": "text", "S": "bytes",
+                "M": "dates", "m": "time spans", "f": "fractional numbers"}.get(arr.dtype.kind, str(arr.dtype))
+        wanted = "whole numbers" if _KINDS[key] == "iu" else "real numbers"
+        raise InputError(f"{path}: '{key}' holds {kind} ({arr.dtype}); it must hold {wanted}")
+
+
+def _unit_rows(d: "Descriptors", path: Path, integer: bool) -> list[str]:
+    """L2-normalise the descriptor rows that are not (cosine similarity is the contract's
+    measure: a row's direction is what it says); the notes saying so, none when every row
+    already was. A zero row has no direction: refused."""
+    if d.vectors.size == 0:
+        return []
+    norms = np.linalg.norm(d.vectors, axis=1)
+    if not np.all(np.isfinite(norms)):  # finite values whose squares overflow float32
+        norms = np.linalg.norm(d.vectors.astype(np.float64), axis=1)
+    zero = np.flatnonzero(norms == 0)
+    if zero.size:
+        raise InputError(f"{path}: descriptor row {int(zero[0])} is all zeros (no direction to compare); "
+                         f"{zero.size} such row(s)")
+    off = np.abs(norms - 1.0) > UNIT_NORM_TOLERANCE
+    if not off.any():
+        return []
+    d.vectors[off] = (d.vectors[off].astype(np.float64) / norms[off, None]).astype(np.float32)
+    what = "integers" if integer else "not of unit length"
+    return [f"{path}: {int(off.sum())} of {len(norms)} descriptor rows were {what}; normalised them to "
+            f"unit length (the similarity is the cosine of the rows' directions)"]
 
 
 def in_batches(images: Iterable[np.ndarray], batch_size: int, count: int, progress: Optional[Progress],
