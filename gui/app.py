@@ -53,6 +53,9 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
     if screenshot is not None:
         ui = window.defaults["ui"]
         window.resize(int(ui.get("screenshot_width", 1600)), int(ui.get("screenshot_height", 1000)))
+        from .window_layout import fit_to_screen
+
+        fit_to_screen(window)   # a picture of what fits this screen (a real one under Xvfb)
     window.show()
 
     if screenshot is None:

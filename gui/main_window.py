@@ -44,7 +44,7 @@ from .model.recording_files import RecordingFiles, Unsaved
 from .node_panel import NodePanel
 from .pair_evidence import pair_yaw
 from .pair_view import PairView
-from .window_layout import split_views
+from .window_layout import fit_to_screen, split_views
 from .params_panel import ParamsPanel, photometric_applies
 from .similarity_view import SimilarityView
 from .worker import FinishedRun, RunController, RunJob
@@ -116,6 +116,7 @@ class MainWindow(QMainWindow):
         geometry = self.settings.value("window/geometry")
         if geometry is not None and interactive:
             self.restoreGeometry(geometry)
+        fit_to_screen(self)   # the default size, or one saved on a bigger screen, fits this one
 
     # ==== construction ==============================================================
     def _build_views(self) -> None:

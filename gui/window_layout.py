@@ -13,7 +13,7 @@ list with ``verified``'s thresholds) the rest.
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QRect, Qt
 
 # Shares of the right column's height: graph, table, pair view (the pair view shows the
 # evidence a decision rests on, so it gets the most).
@@ -47,3 +47,33 @@ def split_views(window) -> None:
     if column > NODE_PANEL_MIN + 140:   # the viewer as tall as its two panoramas, the node panel below
         viewer = min(left + VIEWER_EXTRA, column - NODE_PANEL_MIN)
         window.left_splitter.setSizes([viewer, column - viewer])
+
+
+# Room a window manager takes around a window: its frame, its title bar (pixels).
+FRAME_ALLOWANCE = (16, 48)
+
+
+def fit_to_screen(window) -> None:
+    """Make ``window`` fit its screen's available geometry (issue 43, defect 1).
+
+    The first size (1500x950 by default) and a size restored from a bigger screen are
+    clamped to the room the screen leaves (panels and docks excluded), frame included,
+    and the window is moved inside it: on a 1280x720 screen the evaluation panel, the
+    pair view, the decision buttons and the status bar are all on screen.
+    """
+    from PySide6.QtGui import QGuiApplication
+
+    screen = window.screen() or QGuiApplication.primaryScreen()
+    if screen is None:
+        return
+    room: QRect = screen.availableGeometry()
+    if window.isMaximized() or window.isFullScreen():
+        return
+    width = min(window.width(), room.width() - FRAME_ALLOWANCE[0])
+    height = min(window.height(), room.height() - FRAME_ALLOWANCE[1])
+    if (width, height) != (window.width(), window.height()):
+        window.resize(max(width, 320), max(height, 240))
+    x = min(max(window.x(), room.x()), room.right() - window.width() - FRAME_ALLOWANCE[0] + 1)
+    y = min(max(window.y(), room.y()), room.bottom() - window.height() - FRAME_ALLOWANCE[1] + 1)
+    if (x, y) != (window.x(), window.y()):
+        window.move(max(x, room.x()), max(y, room.y()))

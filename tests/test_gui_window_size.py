@@ -93,3 +93,49 @@ def test_at_1280x720_the_table_shows_its_status_column(qtbot, tmp_path):
     assert right <= table.viewport().width(), "the Status column starts inside the visible table"
     assert w.pair_view.width() >= 380, "the pair view is wide enough to judge a pair"
     w.close()
+
+
+_FIRST_SIZE_SCRIPT = """
+import json, sys
+from PySide6.QtCore import QSettings
+from PySide6.QtWidgets import QApplication
+app = QApplication(["panotopo"])
+from gui.main_window import MainWindow
+w = MainWindow(settings=QSettings(sys.argv[1], QSettings.IniFormat))
+if len(sys.argv) > 2:
+    w.resize(int(sys.argv[2]), int(sys.argv[3]))
+w.show(); app.processEvents()
+room = w.screen().availableGeometry()
+frame = w.frameGeometry()
+print(json.dumps({"w": w.width(), "h": w.height(), "x": w.x(), "y": w.y(),
+                  "room": [room.x(), room.y(), room.width(), room.height()]}))
+w.close()   # saves the geometry, as a quit does
+w.settings.sync()
+print(json.dumps({"saved": w.settings.value("window/geometry") is not None}))
+"""
+
+
+def _first_size(tmp_path, screen, *size):
+    config = tmp_path / f"screen{screen[0]}.json"
+    config.write_text(json.dumps({"screens": [{"name": "s", "x": 0, "y": 0, "width": screen[0],
+                                               "height": screen[1], "logicalDpi": 96, "dpr": 1}]}))
+    env = dict(os.environ, QT_QPA_PLATFORM=f"offscreen:configfile={config}",
+               XDG_CONFIG_HOME=str(tmp_path / "config"),
+               PYTHONPATH=os.pathsep.join([os.getcwd(), os.environ.get("PYTHONPATH", "")]))
+    out = subprocess.run([sys.executable, "-c", _FIRST_SIZE_SCRIPT, str(tmp_path / "s.ini"), *map(str, size)],
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert json.loads(lines[-1])["saved"]
+    return json.loads(lines[-2])
+
+
+def test_the_first_size_fits_a_1280x720_screen_and_a_saved_bigger_one_is_clamped(tmp_path):
+    """Issue 43, defect 1: on a 1280x720 screen the window opened at 1500x950, the evaluation
+    panel, the pair view, the decision buttons and the status bar off screen."""
+    first = _first_size(tmp_path, (1280, 720))
+    assert first["x"] + first["w"] <= 1280 and first["y"] + first["h"] <= 720, first
+    big = _first_size(tmp_path, (2560, 1440), 2400, 1350)   # saved on a big screen ...
+    assert big["w"] > 1500
+    again = _first_size(tmp_path, (1280, 720))               # ... reopened on a small one
+    assert again["x"] + again["w"] <= 1280 and again["y"] + again["h"] <= 720, again
