@@ -231,3 +231,28 @@ def test_wrong_forms_get_one_line(args, tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("panotopo: error:")
     assert not (tmp_path / "d").exists()
+
+
+def _env_of_worker() -> str:
+    return os.environ.get("CUDA_VISIBLE_DEVICES", "")
+
+
+def test_local_gpu_workers_each_see_their_own_gpu(monkeypatch):
+    """The plumbing of one GPU per worker (no GPU needed): worker i has CUDA_VISIBLE_DEVICES set
+    to the i-th device this process may use, and a GPU resource that the batch's tasks ask for."""
+    from distributed import Client
+
+    from engine.batch import _visible_devices, _wants_gpu, local_cluster
+
+    monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "3,5")
+    assert _visible_devices(2) == ["3", "5"]
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES")
+    assert _visible_devices(2) == ["0", "1"]
+    with local_cluster(workers=2, gpus=2) as cluster, Client(cluster) as client:
+        client.wait_for_workers(2, timeout=120)
+        assert _wants_gpu(client)
+        info = client.scheduler_info()["workers"]
+        assert all(w["resources"] == {"GPU": 1} and w["nthreads"] == 1 for w in info.values())
+        assert all(w.startswith("tcp://127.0.0.1:") for w in info)
+        seen = client.run(_env_of_worker)
+        assert sorted(seen.values()) == ["0", "1"]
