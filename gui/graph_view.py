@@ -1,7 +1,7 @@
 """Graph view: nodes and arcs of the map, loops styled by status, toggles per status.
 
 Nodes sit at ground-truth positions when poses are loaded, else on a layout of
-the path (``gui.layout``). Every loop is a curve that bulges away from the path
+the map as decided (``gui.model.layout``). Every loop is a curve that bulges away from the path
 (``gui.loop_arcs``), so a true loop between two nodes at one position is visible.
 A strip above the plot (never over the path) shows one toggle per status with its
 count. Click a node: jump to its frame. Click a loop: select it. Ctrl+click a
@@ -18,7 +18,8 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
-from .layout import path_layout
+from .background import LatestOnly
+from .model.layout import decided_graph, path_layout, solve_layout
 from .loop_arcs import distance_to_curves, loop_curves, nan_joined
 from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
                     STATUS_LABELS, STATUS_ORDER, status_pen)
@@ -102,9 +103,14 @@ class GraphView(QWidget):
         layout.addWidget(self.toggle_strip)
         layout.addWidget(self.plot)
 
+        # Without ground truth the map as decided is drawn, solved again after each decision
+        # (issue 43, defect 2), off the UI thread from a copy of the decided graph.
+        self.layout_worker = LatestOnly(self)
+        self._layout: Optional[tuple[object, np.ndarray, np.ndarray]] = None  # (map, x, y) solved since
         doc.mapReplaced.connect(self.rebuild)
         doc.posesChanged.connect(self.rebuild)
         doc.loopsChanged.connect(self.redraw_loops)
+        doc.loopsChanged.connect(self.relayout)
         doc.labelsChanged.connect(self.redraw_labels)
 
     # -- drawing ---------------------------------------------------------------------
@@ -114,8 +120,13 @@ class GraphView(QWidget):
             self.x = self.y = np.zeros(0)
         else:
             positions = self.doc.topomap.positions() if self.doc.poses is not None else None
-            self.x, self.y = (positions if positions is not None  # layout computed with the map, off the UI thread
-                              else self.doc.prepared("layout", path_layout))
+            solved = self._layout if self._layout is not None and self._layout[0] is self.doc.topomap else None
+            if positions is not None:
+                self.x, self.y = positions
+            elif solved is not None:   # solved again after a decision
+                self.x, self.y = solved[1], solved[2]
+            else:                      # computed with the map, off the UI thread
+                self.x, self.y = self.doc.prepared("layout", path_layout)
         with_gt = self.doc.poses is not None and self.doc.has_map
         self.plot.setLabel("bottom", "x (m)" if with_gt else "")
         self.plot.setLabel("left", "y (m)" if with_gt else "")
@@ -123,7 +134,7 @@ class GraphView(QWidget):
             self.plot.getPlotItem().showAxis(axis, with_gt)
         self.plot.showGrid(x=with_gt, y=with_gt, alpha=0.15)
         title = ("Ground-truth positions" if with_gt else
-                 ("Layout of the path (no ground truth loaded)" if self.doc.has_map else ""))
+                 ("The map as decided (no ground truth loaded)" if self.doc.has_map else ""))
         if title:  # the node markers' key, in the title: no legend box over the path
             title += (" &nbsp; <span style='color:#2ecc71'>▲</span> start <span style='color:#f1c40f'>■</span> end "
                       f"<span style='color:{CURRENT_COLOR}'>◯</span> current")
@@ -146,6 +157,26 @@ class GraphView(QWidget):
         if n:
             self.plot.getPlotItem().enableAutoRange()
             self.plot.autoRange(padding=0.06)
+
+    def relayout(self) -> None:
+        """Solve the layout again for the decisions of now (no ground truth loaded)."""
+        if not self.doc.has_map or self.doc.poses is not None:
+            return
+        topomap = self.doc.topomap
+        graph = decided_graph(topomap, decided_since=True)   # a copy: the user goes on deciding
+        start = np.stack([self.x, self.y], axis=1) if self.x.size == graph.n else None
+        self.layout_worker.submit(lambda: solve_layout(graph, start),
+                                  lambda xy: self._laid_out(topomap, xy))
+
+    def _laid_out(self, topomap, xy: np.ndarray) -> None:
+        if topomap is not self.doc.topomap or self.doc.poses is not None:
+            return
+        self._layout = (topomap, xy[:, 0].copy(), xy[:, 1].copy())
+        self.rebuild()
+
+    def shutdown(self) -> None:
+        """Stop the layout thread (before the window goes)."""
+        self.layout_worker.stop()
 
     def redraw_loops(self) -> None:
         """Draw the loops of the shown statuses as curves; count every status on its toggle."""

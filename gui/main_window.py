@@ -33,7 +33,7 @@ from .eval_panel import EvalPanel
 from .frame_cache import FrameCache
 from .frame_viewer import FrameViewer
 from .graph_view import GraphView
-from .layout import path_layout
+from .model.layout import path_layout
 from .loop_table import LoopTable
 from .manual_loop_dialog import ManualLoopDialog
 from .model import commands as edits
@@ -1307,6 +1307,7 @@ class MainWindow(QMainWindow):
         self.autosave_timer.stop()
         self.frame_viewer.shutdown()
         self.pair_view.shutdown()
+        self.graph_view.shutdown()
         self.runner.stop()
         self.remapper.stop()
         self.similarity_worker.stop()

@@ -110,7 +110,8 @@ class ParamsPanel(QWidget):
         self.method.currentIndexChanged.connect(lambda _: self._edited("method"))
         for name in ("node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"):
             getattr(self, name).valueChanged.connect(lambda _, n=name: self._edited(n))
-        self.long_runs.toggled.connect(lambda _: self._edited("long_runs"))
+        if "long_runs" in MapParams.__dataclass_fields__:   # verified-rules' only parameter (being retired)
+            self.long_runs.toggled.connect(lambda _: self._edited("long_runs"))
 
         describe_box = QGroupBox("Descriptors")
         form = QFormLayout(describe_box)
@@ -210,7 +211,7 @@ class ParamsPanel(QWidget):
             self.window_size.setValue(int(shown.window_size))
             self.count_th.setValue(int(shown.count_th))
             self.neighbor_node_num.setValue(int(shown.neighbor_node_num))
-            self.long_runs.setChecked(bool(shown.long_runs))
+            self.long_runs.setChecked(bool(getattr(shown, "long_runs", False)))  # gone with verified-rules
             self._show_evidence(shown)
         finally:
             self._updating = False

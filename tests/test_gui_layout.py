@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gui.layout import EMBED_MAX_NODES, path_layout
+from gui.model.layout import EMBED_MAX_NODES, decided_layout, path_layout
 from tests.gui_maps import make_doc
 
 
@@ -56,3 +56,46 @@ def test_a_rejected_loop_does_not_fold_the_path():
     doc = make_doc(None, [(0, n - 1, "rejected")], n=n)
     x, y = path_layout(doc.topomap)
     assert np.hypot(x[0] - x[-1], y[0] - y[-1]) > 0.5 * (n - 1)
+
+
+def _candidates(n: int, count: int, seed: int = 3) -> list:
+    rng = np.random.default_rng(seed)
+    pairs = set()
+    while len(pairs) < count:
+        a, b = sorted(int(v) for v in rng.integers(0, n, size=2))
+        if b - a > 5:
+            pairs.add((a, b))
+    return [(a, b, "candidate") for a, b in sorted(pairs)]
+
+
+def test_undecided_candidates_do_not_tie_the_path_into_a_knot():
+    """Issue 43, defect 2: with 35 candidates the path was a knot; rejecting them all left it."""
+    n = 120
+    loops = _candidates(n, 35)
+    doc = make_doc(None, loops, n=n)
+    xy = decided_layout(doc.topomap)
+    assert _crossings(xy[:, 0], xy[:, 1]) == 0, "candidates nobody accepted fold the path"
+    for a, b, _ in loops:
+        doc.topomap.graph.edges[f"n{a}", f"n{b}"]["status"] = "rejected"
+    xy = decided_layout(doc.topomap)
+    assert _crossings(xy[:, 0], xy[:, 1]) == 0
+    assert np.hypot(*(xy[-1] - xy[0])) > 0.5 * (n - 1), "all rejected: the walk is drawn straight"
+
+
+def test_a_confirmed_loop_folds_the_decided_map():
+    n = 40
+    doc = make_doc(None, [(0, n - 1, "candidate")], n=n)
+    before = decided_layout(doc.topomap)
+    doc.topomap.graph.edges["n0", f"n{n - 1}"]["status"] = "confirmed"
+    after = decided_layout(doc.topomap, decided_since=True, start=before)
+    assert np.hypot(*(after[0] - after[-1])) < 0.25 * np.hypot(*(before[0] - before[-1]))
+
+
+def test_positions_the_pose_graph_estimated_are_used_until_a_decision_changes():
+    n = 30
+    doc = make_doc(None, [(0, n - 1, "auto")], n=n)
+    t = np.linspace(0, 2 * np.pi, n)
+    doc.topomap.set_positions(5 * np.cos(t), 5 * np.sin(t))
+    doc.topomap.graph.graph["positions"] = "estimated"
+    assert np.allclose(decided_layout(doc.topomap), np.stack([5 * np.cos(t), 5 * np.sin(t)], axis=1))
+    assert not np.allclose(decided_layout(doc.topomap, decided_since=True)[:, 0], 5 * np.cos(t))

@@ -137,3 +137,24 @@ def test_the_node_threshold_shows_no_number_the_run_will_contradict(qtbot, make_
     during = set(shown)
     assert after == again
     assert during <= {after, "auto"}, (during, after)
+
+
+def test_the_graph_is_the_map_as_decided_and_is_redrawn_after_each_decision(qtbot, make_window):
+    """Defect 2: without ground truth the layout used undecided candidates and was not redrawn."""
+    w = make_window()
+    n = 60
+    w.doc.replace_map(make_map([dict(a=0, b=n - 1, status="candidate", score=0.9)], n))
+    g = w.graph_view
+
+    def gap() -> float:
+        return float(np.hypot(g.x[0] - g.x[n - 1], g.y[0] - g.y[n - 1]))
+
+    assert gap() > 0.5 * (n - 1), "an undecided candidate does not fold the drawing"
+    w.loop_table.select_key(w.loop_table.visible_keys()[0])
+    w.decide("confirmed")
+    assert g.layout_worker.wait(30_000)
+    assert gap() < 0.25 * (n - 1), "the confirmed loop is drawn as a loop"
+    w.loop_table.select_key(w.loop_table.visible_keys()[0])
+    w.decide("rejected")
+    assert g.layout_worker.wait(30_000)
+    assert gap() > 0.5 * (n - 1), "rejected: the loop is gone from the drawing"

@@ -106,7 +106,11 @@ def prepare_map(topomap, decisions: Optional[dict] = None, poses=None,
     frames = np.asarray(topomap.frames(), np.int64)
     # Before the decisions overwrite the statuses; engine maps since the tiers also carry "tier".
     tiers = {_key(g, u, v): str(attrs.get("tier", attrs.get("status", "auto"))) for u, v, attrs in topomap.loops()}
-    if decisions:
+    if decisions and any(decisions.get(k) for k in ("loops", "manual")):
+        topomap.apply_decisions(decisions)
+        if topomap.graph.graph.get("positions") == "estimated":
+            topomap.graph.graph["positions"] = "before decisions"   # estimated without them: stale
+    elif decisions:
         topomap.apply_decisions(decisions)
     if poses is not None:
         x, y = poses.at(np.asarray(topomap.stamps(), np.float64))
