@@ -26,11 +26,12 @@ The contract:
 * One bad recording fails alone: ``describe_batch`` returns an ``Outcome`` per recording
   (status "described", "done" or "failed" with a one-line reason) and the CLI exits non-zero
   when any failed.
-* Where: a local cluster by default (``local_cluster``: one worker per GPU with
-  ``CUDA_VISIBLE_DEVICES`` set to its own GPU and a ``GPU`` resource, else one single-threaded
+* Where: a local cluster by default (``local_cluster``: when the descriptor runs on a GPU
+  (``uses_gpu``: its device "auto" or "cuda") and there are GPUs, one worker per GPU with
+  ``CUDA_VISIBLE_DEVICES`` set to its own GPU and a ``GPU`` resource; else one single-threaded
   worker per core), or an existing scheduler (``scheduler="tcp://host:8786"``) whose workers see
-  the same paths (docs/cluster.md). When any worker of the cluster has a ``GPU`` resource, every
-  task asks for one.
+  the same paths (docs/cluster.md). When the descriptor runs on a GPU and any worker of the
+  cluster has a ``GPU`` resource, every task asks for one.
 * Progress: workers send (recording, frames done, frames expected) as Dask events under a topic
   of this run; ``BatchBars`` draws two tqdm bars on stderr, recordings and frames.
 """
@@ -272,6 +273,25 @@ def gpu_count() -> int:
         return 0
 
 
+def uses_gpu(settings) -> bool:
+    """Whether ``settings`` run the descriptor's network on a GPU where there is one: its
+    ``device`` option (given, or the model's default: effnet-vlad's is "cpu", the others'
+    "auto") is "auto" or names CUDA."""
+    import inspect
+
+    from . import descriptors as registry
+
+    plain = _plain_settings(settings)
+    device = (plain.get("options") or {}).get("device")
+    if device is None:
+        try:
+            parameter = inspect.signature(registry.model_class(plain["descriptor"])).parameters.get("device")
+        except (InputError, KeyError):
+            return False
+        device = None if parameter is None else parameter.default
+    return isinstance(device, str) and (device == "auto" or device.startswith("cuda"))
+
+
 def _visible_devices(gpus: int) -> list[str]:
     """The CUDA_VISIBLE_DEVICES entry of each of ``gpus`` devices (a restriction the user set
     on this process is kept: worker i gets the i-th device of it)."""
@@ -306,12 +326,13 @@ def local_cluster(workers: Optional[int] = None, gpus: Optional[int] = None):
                         silence_logs=logging.CRITICAL)
 
 
-def _connect(scheduler: Optional[str], workers: Optional[int]):
-    """(client, cluster or None): a client of ``scheduler`` or of a new local cluster."""
+def _connect(scheduler: Optional[str], workers: Optional[int], gpu: bool):
+    """(client, cluster or None): a client of ``scheduler`` or of a new local cluster (with GPU
+    workers only when ``gpu``: the descriptor runs on one)."""
     from distributed import Client
 
     if scheduler is None:
-        cluster = local_cluster(workers)
+        cluster = local_cluster(workers, gpus=None if gpu else 0)
         return Client(cluster), cluster
     try:
         client = Client(scheduler, timeout="15s")
@@ -413,11 +434,12 @@ def describe_batch(inputs: Sequence[str | Path], out_dir: str | Path, settings,
     run = uuid.uuid4().hex[:12]
     topic = f"panotopo-progress-{run}"
     tally = _Tally()
-    client, cluster = _connect(scheduler, workers)
+    gpu = uses_gpu(settings)
+    client, cluster = _connect(scheduler, workers, gpu)
     futures = {}
     try:
         client.subscribe_topic(topic, tally.event)
-        resources = {"GPU": 1} if _wants_gpu(client) else None
+        resources = {"GPU": 1} if gpu and _wants_gpu(client) else None
         for i, job in enumerate(todo):
             digest = hashlib.sha1(job.output.encode("utf-8")).hexdigest()[:12]
             future = client.submit(describe_one, job.path, job.output, plain, topic, run,

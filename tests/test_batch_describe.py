@@ -242,8 +242,11 @@ def test_local_gpu_workers_each_see_their_own_gpu(monkeypatch):
     to the i-th device this process may use, and a GPU resource that the batch's tasks ask for."""
     from distributed import Client
 
-    from engine.batch import _visible_devices, _wants_gpu, local_cluster
+    from engine.batch import _visible_devices, _wants_gpu, local_cluster, uses_gpu
+    from engine.pipeline import DescribeSettings
 
+    assert not uses_gpu(DescribeSettings())        # effnet-vlad runs on the CPU unless told
+    assert uses_gpu(DescribeSettings(options={"device": "cuda"})) and uses_gpu(DescribeSettings(descriptor="megaloc"))
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "3,5")
     assert _visible_devices(2) == ["3", "5"]
     monkeypatch.delenv("CUDA_VISIBLE_DEVICES")
