@@ -3,6 +3,7 @@
     python benchmarks/bench_shift.py --mode agreement [--seeds 0,1,2,3,4]
     python benchmarks/bench_shift.py --mode methods   [--seeds 0,1,2] [--layout sectors]
     python benchmarks/bench_shift.py --mode verified  [--seeds 8,9]   [--layout sectors]
+    python benchmarks/bench_shift.py --mode stability [--seeds 0,1,2,3,4] [--seeds2 0,1]
 
 ``agreement``: for same-place pairs (<= 1 m apart, >= 20 s apart) of every synthetic
 route, the share whose canonical headings (``engine.shift.canonical_shift``) agree with
@@ -10,6 +11,11 @@ the true relative yaw within 20 degrees. ``methods``: simple, shift-simple and o
 crossing and reverse routes at the same calibrated threshold (the harness of
 ``engine.benchmark``), with the ``effnet-vlad`` layout given. ``verified``: the
 ``verified`` method (and ``ours``) on held-out seeds with that layout.
+``stability``: the image-only shift against two ways of tying it to the previous frame
+(tracking by ``relative_yaw``) and against the shift from the recorded heading, on the
+synthetic routes (``engine.synth`` crossing/reverse, where the parameters were looked at;
+``engine.synth2`` crossing/reverse untouched) and on the five real GoPro MAX photos (EXIF
+GPSImgDirection), whose true turns come from the feature two-view geometry.
 Recordings are 256x128 at 1 frame/s like bench_methods.py; descriptors are cached under
 --cache with the layout in the file name (never mix caches of different versions).
 The table goes to stdout.
@@ -76,6 +82,141 @@ def agreement(seeds) -> str:
     return "\n".join(lines)
 
 
+# --- stability: consecutive frames and revisits, image-only shift vs tracking vs heading ---
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "panoramax-gopromax"
+
+
+def _wrap(deg):
+    return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
+
+
+def _cached_frames(name: str, make, cache: Path):
+    """(frames, x, y, yaw) of a rendered recording, kept under ``cache`` between runs."""
+    path = cache / f"stability_{name}.npz"
+    if path.is_file():
+        z = np.load(path)
+        return z["frames"], z["x"], z["y"], z["yaw"]
+    rec = make()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, frames=rec.frames, x=rec.poses.x, y=rec.poses.y, yaw=rec.poses.yaw)
+    return rec.frames, rec.poses.x, rec.poses.y, rec.poses.yaw
+
+
+def tracked_headings(frames, memory: float) -> np.ndarray:
+    """Canonical headings (degrees) tied to the previous frame: the first harmonic of each
+    frame plus ``memory`` times the previous sum turned by ``relative_yaw`` (0: the
+    image-only shift; 1: pure tracking), re-anchored where the alignment scores below 0.3."""
+    from engine.shift import heading_harmonic, relative_yaw
+
+    out, acc = [], None
+    for k, f in enumerate(frames):
+        c = heading_harmonic(f)
+        if acc is not None and memory > 0:
+            yaw, score = relative_yaw(frames[k - 1], f)
+            acc = c + memory * acc * np.exp(-2j * np.pi * yaw / 360.0) if score >= 0.3 else c
+        else:
+            acc = c
+        out.append((-np.degrees(np.angle(acc))) % 360.0)
+    return np.array(out)
+
+
+def shift_headings(frames, yaw, how: str) -> np.ndarray:
+    """The shift of every frame as a heading in degrees (columns * 360 / W)."""
+    from engine.shift import shift_from_yaw
+
+    w = frames.shape[2]
+    if how == "image":
+        return np.array([canonical_shift(f) for f in frames]) * 360.0 / w
+    if how == "heading":
+        return np.array([shift_from_yaw(w, a) for a in yaw]) * 360.0 / w
+    return tracked_headings(frames, {"track 0.7": 0.7, "track 1": 1.0}[how])
+
+
+def shifted_similarity(frames, heads, i, j) -> np.ndarray:
+    """Mean correlation of the column signatures of the shifted frames of each pair, as they
+    are (no search): 1 when the shift makes a revisit the same picture."""
+    from engine.shift import apply_shift, column_signature
+
+    w = frames.shape[2]
+    sig = [column_signature(apply_shift(f, int(round(h * w / 360.0)) % w)) for f, h in zip(frames, heads)]
+    return np.array([float(np.mean(np.sum(sig[a] * sig[b], axis=1)) * sig[a].shape[0]
+                           / max(1, np.count_nonzero(np.any(sig[a] != 0, axis=1) & np.any(sig[b] != 0, axis=1))))
+                     for a, b in zip(i, j)])
+
+
+WAYS = ("image", "track 0.7", "track 1", "heading")
+
+
+def stability_rows(family: str, recordings) -> list[str]:
+    errs = {w: [] for w in WAYS}
+    steps = {w: [] for w in WAYS}
+    sims = {w: [] for w in WAYS}
+    for frames, x, y, yaw in recordings:
+        i, j = same_place_pairs(x, y)
+        for way in WAYS:
+            h = shift_headings(frames, yaw, way)
+            errs[way].append(np.abs(_wrap((h[j] - h[i]) - np.degrees(yaw[j] - yaw[i]))))
+            steps[way].append(np.abs(_wrap(np.diff(h) - np.degrees(np.diff(yaw)))))
+            sims[way].append(shifted_similarity(frames, h, i, j))
+    rows = []
+    for way in WAYS:
+        e, s, m = (np.concatenate(v[way]) for v in (errs, steps, sims))
+        rows.append(f"| {family} | {way} | {e.size} | {np.mean(e <= 20):.2f} | {np.mean(e <= 45):.2f} | "
+                    f"{np.mean(m):.3f} | {np.median(s):.1f} | {np.percentile(s, 95):.1f} | {np.mean(s > 10):.2f} |")
+    return rows
+
+
+def real_rows() -> list[str]:
+    """Consecutive real photos: how far each way's shift change misses the true turn."""
+    import cv2
+
+    from engine.features import extract
+    from engine.sources import FolderSource
+    from engine.sphere import two_view
+
+    if not REAL.is_dir():
+        return [f"(no real photos at {REAL})"]
+    with FolderSource(REAL) as src:
+        headings = src.headings()
+        files = list(src.files)
+    imgs = [cv2.resize(cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2RGB), (1024, 512),
+                       interpolation=cv2.INTER_AREA) for f in files]
+    wide = [cv2.resize(cv2.cvtColor(cv2.imread(str(f)), cv2.COLOR_BGR2RGB), (2048, 1024),
+                       interpolation=cv2.INTER_AREA) for f in files]
+    feats = [extract(v) for v in wide]
+    image = np.array([canonical_shift(v) for v in imgs]) * 360.0 / 1024
+    exif = -np.asarray(headings)                 # shift_from_heading in degrees, up to a constant
+    rows = ["| photos | true turn (two-view) | image shift change | miss | EXIF shift change | miss |",
+            "|---|---|---|---|---|---|"]
+    miss_i, miss_e = [], []
+    for k in range(len(imgs) - 1):
+        tv = two_view(feats[k], feats[k + 1])
+        turn = float(tv.yaw_deg)                 # content displacement = the ideal shift change
+        di, de = float(_wrap(image[k + 1] - image[k])), float(_wrap(exif[k + 1] - exif[k]))
+        miss_i.append(abs(_wrap(di - turn)))
+        miss_e.append(abs(_wrap(de - turn)))
+        rows.append(f"| {k + 1}-{k + 2} | {turn:.1f} ({tv.inliers} inliers) | {di:.1f} | {miss_i[-1]:.1f} | "
+                    f"{de:.1f} | {miss_e[-1]:.1f} |")
+    rows.append(f"| mean miss | | | {np.mean(miss_i):.1f} | | {np.mean(miss_e):.1f} |")
+    return rows
+
+
+def stability(seeds, seeds2, cache: Path) -> str:
+    from engine.synth2 import make_recording as make_recording2
+
+    first = [_cached_frames(f"s1_{case.name}", lambda c=case: render(c), cache)
+             for case in (case_for(r, look, s) for r in ("crossing", "reverse")
+                          for look in ("indoor", "outdoor") for s in seeds)]
+    second = [_cached_frames(f"s2_{r}_{s}", lambda r=r, s=s: make_recording2(r, s, width=256), cache)
+              for r in ("crossing", "reverse") for s in seeds2]
+    head = ["| family | shift | same-place pairs | agree <= 20 deg | <= 45 deg | shifted similarity | "
+            "step miss median | p95 | share > 10 deg |", "|---|---|---|---|---|---|---|---|---|"]
+    return "\n".join([f"## Shift stability: synth seeds {seeds}, synth2 seeds {seeds2} (crossing, reverse)", ""]
+                     + head + stability_rows("synth", first) + stability_rows("synth2", second)
+                     + ["", "## Real GoPro MAX photos 1-5 (one heading, walking north)", ""] + real_rows())
+
+
 def describe(case: Case, shifts, layout: str, input_height: int, cache: Path) -> Described:
     by_shift = {}
     rec = None
@@ -109,8 +250,9 @@ def methods_rows(seeds, routes, methods, shifts, layout, input_height, cache):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--mode", choices=("agreement", "methods", "verified"), default="methods")
+    ap.add_argument("--mode", choices=("agreement", "methods", "verified", "stability"), default="methods")
     ap.add_argument("--seeds", default=None)
+    ap.add_argument("--seeds2", default="0,1", help="engine.synth2 seeds (stability)")
     ap.add_argument("--layout", default="sectors")
     ap.add_argument("--input-height", type=int, default=128)
     ap.add_argument("--cache", default="/tmp/pshift/bench")
@@ -119,6 +261,9 @@ def main() -> int:
     if args.mode == "agreement":
         seeds = [int(s) for s in (args.seeds or "0,1,2,3,4").split(",")]
         text = f"## Canonical heading agreement, same-place pairs, seeds {seeds}\n\n" + agreement(seeds)
+    elif args.mode == "stability":
+        seeds = [int(s) for s in (args.seeds or "0,1,2,3,4").split(",")]
+        text = stability(seeds, [int(s) for s in args.seeds2.split(",")], cache)
     elif args.mode == "methods":
         seeds = [int(s) for s in (args.seeds or "0,1,2").split(",")]
         routes = ("crossing", "reverse")
