@@ -186,3 +186,23 @@ def gpmf_payload(fixes: list, cori_yaw_deg: list | None = None, gps9: bool = Fal
                             klv("CORI", "s", 8, len(cori_yaw_deg), q)))
     return nest("DEVC", klv("DVID", "L", 4, 1, struct.pack(">L", 1)), klv("DVNM", "c", 1, 8, b"GoProMAX"),
                 *streams)
+
+
+def write_insv_pair(folder: Path, frames: int = 20, fov: float = 200.0, lens: int = 256,
+                    gop: int = FPS) -> tuple[Path, Path]:
+    """An Insta360 5.7K-style recording: one file per lens, ``VID_..._00_n.insv`` (left image of
+    FFmpeg's dfisheye) and ``VID_..._10_n.insv`` (right), one square H.264 stream each."""
+    paths = tuple(folder / f"VID_20260101_120000_{lens_id}_001.insv" for lens_id in ("00", "10"))
+    outs = [av.open(str(p), "w", format="mp4") for p in paths]
+    try:
+        streams = [_video_stream(out, "libx264", lens, lens, gop) for out in outs]
+        for k in range(frames):
+            dfe = dual_fisheye(panorama(k), fov, lens)
+            for out, s, part in zip(outs, streams, (dfe[:, :lens], dfe[:, lens:])):
+                _encode(out, s, np.ascontiguousarray(part), k)
+        for out, s in zip(outs, streams):
+            _flush(out, [s])
+    finally:
+        for out in outs:
+            out.close()
+    return paths

@@ -194,3 +194,20 @@ def test_panotopo_maps_camera_files_without_options(files, tmp_path, capsys):
             meta = json.loads(str(z["meta"]))
         assert meta["projection"]["name"] == ("dual-fisheye" if name == "insv" else "eac")
         assert meta["frame_width"] == clips.W
+
+
+def test_an_insta360_recording_in_two_files_opens_from_either(tmp_path):
+    lens0, lens1 = clips.write_insv_pair(tmp_path, frames=10)
+    for path in (lens0, lens1):
+        with open_recording(path) as src:
+            assert isinstance(src, Video360Source) and src.projection.layout == "two-streams"
+            got = list(src.frames(0.5))
+            assert [f.index for f in got] == [0, 5]
+            assert all(error(f.rgb, f.index) < TOL for f in got)
+    alone = tmp_path / "alone"
+    alone.mkdir()
+    lens0.rename(alone / lens0.name)                   # the other lens's file is missing
+    with pytest.raises(InputError) as err:
+        with open_recording(alone / lens0.name) as src:
+            list(src.frames(1.0))
+    assert "not an equirectangular" in str(err.value) and "\n" not in str(err.value)

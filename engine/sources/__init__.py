@@ -77,7 +77,13 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
         found = detect_projection(path, given)
         if found.converts:
             return Video360Source(path, found, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
-        return VideoSource(path, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
+        try:
+            return VideoSource(path, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
+        except InputError as err:
+            if "not an equirectangular" not in str(err):
+                raise
+            raise InputError(f"{err}; if it is a 360 camera's own layout, name it with --projection "
+                             f"(dual-fisheye or eac)") from None
     if is_bag:
         source: FrameSource = BagSource(path, topic)
     elif path.is_dir():

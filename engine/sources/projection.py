@@ -5,7 +5,8 @@ Projections (``Projection.name``):
 - ``equirect``: a 2:1 equirectangular panorama (what the engine works on; no conversion).
 - ``dual-fisheye``: two circular fisheye images of back-to-back lenses, side by side in one
   frame (Insta360 One/One X ``.insv``, ROS dual-fisheye drivers) or one per video stream
-  (``layout="two-streams"``: newer ``.insv``); the lens field of view ``fov`` (degrees) and a
+  (``layout="two-streams"``: newer ``.insv``, or the two files, ``_00_`` and ``_10_``, an
+  Insta360 writes at 5.7K: ``insta360_pair``); the lens field of view ``fov`` (degrees) and a
   roll of each lens image about its optical axis (``roll``, degrees, counter-clockwise) are
   options. The lens order and orientation are FFmpeg's ``dfisheye``: the left image is one
   lens, the right one the other, both upright; ``roll=A/B`` says the file has the left image
@@ -32,6 +33,7 @@ width asked for. A converter holds one filter graph: one per thread.
 
 from __future__ import annotations
 
+import re
 from dataclasses import asdict, dataclass, replace
 from fractions import Fraction
 from pathlib import Path
@@ -134,15 +136,20 @@ class StreamShape:
 
 
 def projection_from_streams(shapes: Sequence[StreamShape], suffix: str,
-                            given: Optional[Projection] = None) -> Projection:
+                            given: Optional[Projection] = None, pair: Optional[StreamShape] = None) -> Projection:
     """The projection of a video with these video streams (in order) and file suffix.
 
     Rules (what cameras write): two video streams of equal size about 3:1 -> GoPro EAC;
     two square streams -> dual fisheye, one lens per stream; ``.insv`` with one 2:1 stream ->
-    dual fisheye side by side; else equirectangular. A ``given`` projection (the option) wins
-    over the file, but keeps the stream layout the file has where the option names none.
+    dual fisheye side by side; else equirectangular. ``pair``: the video stream of the other
+    lens's file (Insta360 at 5.7K writes one file per lens, ``insta360_pair``), which makes
+    one square stream and its pair a dual fisheye of two streams. A ``given`` projection (the
+    option) wins over the file, but keeps the stream layout the file has where the option
+    names none.
     """
     video = [s for s in shapes if s.width > 0 and s.height > 0]
+    if pair is not None and len(video) == 1:
+        video = [video[0], pair]
     insta = suffix.lower() == ".insv"
     two_equal = len(video) >= 2 and (video[0].width, video[0].height) == (video[1].width, video[1].height)
     gopro = two_equal and GOPRO_ASPECT[0] <= video[0].width / video[0].height <= GOPRO_ASPECT[1]
@@ -178,6 +185,39 @@ def _with_extra(p: Projection, video: Sequence[StreamShape]) -> Projection:
     return replace(p, extra=int(extra))
 
 
+_INSTA_PAIR = re.compile(r"^(.*_)(00|10)(_\d+\.insv)$", re.IGNORECASE)
+
+
+def insta360_pair(path: Path) -> Optional[tuple[Path, Path]]:
+    """(lens 0 file, lens 1 file) of an Insta360 recording written one file per lens
+    (``VID_<date>_<time>_00_<n>.insv`` and ``..._10_<n>.insv``), when both exist; else None."""
+    m = _INSTA_PAIR.match(Path(path).name)
+    if m is None:
+        return None
+    files = [Path(path).with_name(f"{m.group(1)}{lens}{m.group(3)}") for lens in ("00", "10")]
+    return (files[0], files[1]) if all(f.is_file() for f in files) else None
+
+
+def lens_inputs(path: Path, p: Projection) -> list[tuple[Path, int]]:
+    """(file, video stream number) of each stream the frames of ``p`` come from: the file's
+    own streams, or the two files of an Insta360 pair (``insta360_pair``)."""
+    if p.streams == 2:
+        pair = insta360_pair(path)
+        if pair is not None and len(_shapes_of(path)) == 1:
+            return [(pair[0], 0), (pair[1], 0)]
+        return [(Path(path), 0), (Path(path), 1)]
+    return [(Path(path), 0)]
+
+
+def _shapes_of(path: Path) -> list[StreamShape]:
+    import av
+
+    with av.open(str(path)) as container:
+        return [StreamShape(int(s.codec_context.width or 0), int(s.codec_context.height or 0),
+                            str(s.metadata.get("handler_name", "")).strip())
+                for s in container.streams.video]
+
+
 def detect_projection(path: Path, given: Optional[Projection] = None) -> Projection:
     """``projection_from_streams`` for the file at ``path`` (read with PyAV). A file PyAV
     cannot open is equirectangular as far as this goes (the video reader then says what is
@@ -190,16 +230,19 @@ def detect_projection(path: Path, given: Optional[Projection] = None) -> Project
             raise InputError(f"{path}: converting {given.name} video needs PyAV (pip install av)") from None
         return given or Projection()
     try:
-        with av.open(str(path)) as container:
-            shapes = [StreamShape(int(s.codec_context.width or 0), int(s.codec_context.height or 0),
-                                  str(s.metadata.get("handler_name", "")).strip())
-                      for s in container.streams.video]
+        shapes = _shapes_of(path)
+        pair = None
+        files = insta360_pair(path)
+        if files is not None and len(shapes) == 1:
+            others = _shapes_of(files[1] if Path(path).name == files[0].name else files[0])
+            if len(others) == 1 and (others[0].width, others[0].height) == (shapes[0].width, shapes[0].height):
+                pair = others[0]
     except (av.error.FFmpegError, OSError) as err:
         if given is not None and given.converts:
             raise InputError(f"{path}: unreadable or unsupported video container "
                              f"({getattr(err, 'strerror', None) or err})") from None
         return given or Projection()
-    return projection_from_streams(shapes, Path(path).suffix, given)
+    return projection_from_streams(shapes, Path(path).suffix, given, pair)
 
 
 # --------------------------------------------------------------------------- geometry

@@ -3,8 +3,9 @@
 ``Video360Source`` reads through PyAV only (OpenCV sees one stream and no projection):
 sampling, stamps and random access all go through ``engine.sources.video_av.AvSampler``,
 which converts each decoded frame (or pair of frames, one per stream) to an equirectangular
-panorama with ``engine.sources.projection.Converter`` as it is decoded. Frame indices and
-stamps are those of the first video stream (position in presentation order, pts from the
+panorama with ``engine.sources.projection.Converter`` as it is decoded. An Insta360 recording written one file
+per lens (``VID_..._00_n.insv`` and ``..._10_n.insv``) opens from either file. Frame indices
+and stamps are those of the first video stream (position in presentation order, pts from the
 first frame); ``resolution`` is the panorama's at the camera's own resolution.
 """
 
@@ -20,7 +21,7 @@ from ..errors import InputError
 from ..frames import Frame, FrameSource
 from ..validate import frame_size
 from . import video_av
-from .projection import Projection
+from .projection import Projection, lens_inputs
 
 
 class Video360Source(FrameSource):
@@ -34,7 +35,8 @@ class Video360Source(FrameSource):
             raise InputError(f"{self.path}: reading {projection.name} video needs PyAV (pip install av)")
         try:
             self.sampler = video_av.AvSampler(self.path, projection=projection, keyframes_only=keyframes_only,
-                                              allow_truncated=allow_truncated)
+                                              allow_truncated=allow_truncated,
+                                              inputs=lens_inputs(self.path, projection))
         except video_av.AvUnavailable as err:
             raise InputError(f"{self.path}: cannot read this {projection.name} video ({err})") from None
         self._resolution = self.sampler.resolution

@@ -203,30 +203,35 @@ class AvSampler:
 
     ``projection`` (``engine.sources.projection.Projection``, None = equirectangular): frames
     of another projection are converted to equirectangular as they are decoded, from one
-    video stream or two (GoPro .360, two-stream .insv: their frames are paired by position
-    in presentation order, and a frame counts as a key frame only where both streams have
-    one). ``keyframes_only``: ``frames`` delivers every key frame and nothing else
+    video stream or two (``inputs``: (file, video stream number) pairs, e.g. the two streams
+    of a GoPro .360 or the two files of an Insta360 5.7K recording; each input has its own
+    demuxer and decoder, their frames are paired by position in presentation order, and a
+    frame counts as a key frame only where every input has one). ``keyframes_only``: ``frames`` delivers every key frame and nothing else
     (``--interval keyframes``). ``allow_truncated``: a file that ends before the frames it
     declares is read as far as it goes (``missing`` tells how many are lost) instead of
     refused (``--skip-bad-frames``).
     """
 
     def __init__(self, path: str | Path, use_keyframes: bool = True, projection=None,
-                 keyframes_only: bool = False, allow_truncated: bool = False) -> None:
+                 keyframes_only: bool = False, allow_truncated: bool = False, inputs=None) -> None:
         self.path = Path(path)
         self.use_keyframes = use_keyframes
         self.keyframes_only = keyframes_only
         self.projection = projection if projection is not None and projection.converts else None
-        streams = self.projection.streams if self.projection is not None else 1
-        indexes = [read_index(self.path, k) for k in range(streams)]
+        if inputs is None:
+            streams = self.projection.streams if self.projection is not None else 1
+            inputs = [(self.path, k) for k in range(streams)]
+        self.inputs = [(Path(f), int(k)) for f, k in inputs]
+        indexes = [read_index(f, k) for f, k in self.inputs]
         self.missing = max(ix.missing for ix in indexes)
         if self.missing and not allow_truncated:
-            raise InputError(truncation_message(self.path, max(indexes, key=lambda ix: ix.missing)) +
+            worst = max(range(len(indexes)), key=lambda k: indexes[k].missing)
+            raise InputError(truncation_message(self.inputs[worst][0], indexes[worst]) +
                              "; to read the frames before the damage, use --skip-bad-frames "
                              "(in the app: Skip bad frames)")
         self.indexes = _paired(self.path, indexes)
         self.index = self.indexes[0]
-        self.shapes = _stream_shapes(self.path, streams)
+        self.shapes = [_stream_shape(f, k) for f, k in self.inputs]
         self.last_stats = SampleStats()
 
     @property
@@ -270,7 +275,7 @@ class AvSampler:
         """Frame ``index`` (presentation order), decoded from its key frame (random access)."""
         if not 0 <= index < len(self.index):
             raise IndexError(f"frame {index} outside 0..{len(self.index) - 1}")
-        decoders = _Decoders(self.path, self.indexes, max_width, self.projection, self.shapes)
+        decoders = _Decoders(self.inputs, self.indexes, max_width, self.projection, self.shapes)
         try:
             done = decoders.decode(self._runs(np.asarray([index]))[0])
         finally:
@@ -295,7 +300,7 @@ class AvSampler:
         self.last_stats = stats
         if plan.indices.size == 0:
             return
-        decoders = _Decoders(self.path, self.indexes, max_width, self.projection, self.shapes)
+        decoders = _Decoders(self.inputs, self.indexes, max_width, self.projection, self.shapes)
         pending: deque = deque()
         pool = ThreadPoolExecutor(max_workers=DECODE_THREADS, thread_name_prefix="panotopo-decode")
         try:
@@ -329,19 +334,20 @@ def _paired(path: Path, indexes: list[StreamIndex]) -> list[StreamIndex]:
     n = min(len(ix) for ix in indexes)
     first = indexes[0]
     if n < 0.99 * max(len(ix) for ix in indexes) - 1:
-        raise InputError(f"{path}: its two video streams have {len(first)} and {len(indexes[1])} frames; "
+        raise InputError(f"{path}: its two lens videos have {len(first)} and {len(indexes[1])} frames; "
                          f"the halves of a 360 picture must come in pairs")
     key = np.logical_and.reduce([ix.key[:n] for ix in indexes])
     if not key.any():
-        raise InputError(f"{path}: its video streams have no key frame in common")
+        raise InputError(f"{path}: its lens videos have no key frame in common")
     # presentation positions >= n are dropped; decode positions stay those of the file
     return [StreamIndex(stamps=first.stamps[:n], pts=ix.pts[:n], key=key, decode_pos=ix.decode_pos[:n],
                         fps=first.fps, declared=ix.declared) for ix in indexes]
 
 
-def _stream_shapes(path: Path, streams: int) -> list[tuple[int, int]]:
+def _stream_shape(path: Path, stream: int) -> tuple[int, int]:
     with av.open(str(path)) as container:
-        return [(int(s.codec_context.width), int(s.codec_context.height)) for s in container.streams.video[:streams]]
+        s = container.streams.video[stream]
+        return int(s.codec_context.width), int(s.codec_context.height)
 
 
 # Threads that decode runs at once. A run after a seek starts at a key frame, and FFmpeg
@@ -366,35 +372,41 @@ class _DecodedRun:
 
 
 class _Decoders:
-    """One container (and packet reader) per decoding thread, closed together at the end;
-    with a projection, one converter per thread too."""
+    """Per decoding thread, one container and packet reader per input (file, video stream),
+    closed together at the end; with a projection, one converter per thread too."""
 
-    def __init__(self, path: Path, indexes, max_width: Optional[int], projection=None,
-                 shapes=None) -> None:
+    def __init__(self, inputs, indexes, max_width: Optional[int], projection=None, shapes=None) -> None:
+        if isinstance(inputs, (str, Path)):
+            inputs = [(Path(inputs), 0)]
         if isinstance(indexes, StreamIndex):
             indexes = [indexes]
-        self.path, self.indexes, self.max_width = path, list(indexes), max_width
+        self.inputs, self.indexes, self.max_width = list(inputs), list(indexes), max_width
+        self.path = self.inputs[0][0]
         self.index = self.indexes[0]
         self.projection, self.shapes = projection, shapes
         self.orders = [_DecodeOrder(ix) for ix in self.indexes]   # read-only, shared by the threads
+        self.pres_of = np.empty(len(self.index), dtype=np.int64)  # input 0: decode -> presentation position
+        self.pres_of[self.index.decode_pos] = np.arange(len(self.index))
         self._local = threading.local()
         self._opened: list = []
         self._lock = threading.Lock()
 
-    def _reader(self) -> "_PacketReader":
-        reader = getattr(self._local, "reader", None)
-        if reader is None:
-            try:
-                container = av.open(str(self.path))
-            except (av.error.FFmpegError, OSError) as err:
-                raise InputError(f"{self.path}: cannot open the video ({_one_line(err)})") from None
-            with self._lock:
-                self._opened.append(container)
-            streams = list(container.streams.video[:len(self.indexes)])
-            for stream in streams:
+    def _readers(self) -> list:
+        readers = getattr(self._local, "readers", None)
+        if readers is None:
+            readers = []
+            for (path, k), order in zip(self.inputs, self.orders):
+                try:
+                    container = av.open(str(path))
+                except (av.error.FFmpegError, OSError) as err:
+                    raise InputError(f"{path}: cannot open the video ({_one_line(err)})") from None
+                with self._lock:
+                    self._opened.append(container)
+                stream = container.streams.video[k]
                 stream.codec_context.thread_type = "AUTO"
-            reader = self._local.reader = _PacketReader(container, streams, self.orders)
-        return reader
+                readers.append(_PacketReader(container, stream, order))
+            self._local.readers = readers
+        return readers
 
     def _converter(self):
         conv = getattr(self._local, "converter", None)
@@ -405,22 +417,29 @@ class _Decoders:
         return conv
 
     def decode(self, run: tuple[int, int, list[int]]) -> _DecodedRun:
-        """Decode one run (in a worker thread): its picks as RGB, checked, in pick order."""
+        """Decode one run (in a worker thread): its picks as RGB, checked, in pick order.
+        ``run`` is in input 0's decode positions; the other inputs decode the same frames
+        (same presentation positions) in theirs."""
         first, last, picks = run
-        packets = self._reader()
-        codecs = [stream.codec_context for stream in packets.streams]
-        wanted = [{int(ix.pts[i]): i for i in picks} for ix in self.indexes]
-        got: list[dict] = [{} for _ in codecs]
-        decoded, seeks_before = 0, packets.seeks
-        try:
-            for k, packet in packets.run(first, last):
-                decoded += k == 0
-                self._keep(k, codecs[k].decode(packet), wanted[k], got[k])
-            for k, codec in enumerate(codecs):
-                self._keep(k, codec.decode(None), wanted[k], got[k])
+        readers = self._readers()
+        start = int(self.pres_of[first])          # presentation position of the run's key frame
+        got: list[dict] = [{} for _ in readers]
+        decoded, seeks = 0, 0
+        for k, (packets, ix) in enumerate(zip(readers, self.indexes)):
+            codec = packets.stream.codec_context
+            wanted = {int(ix.pts[i]): i for i in picks}
+            first_k = int(ix.decode_pos[start])
+            last_k = max(int(ix.decode_pos[i]) for i in picks)
+            seeks_before = packets.seeks
+            try:
+                for packet in packets.run(first_k, last_k):
+                    decoded += k == 0
+                    self._keep(codec.decode(packet), wanted, got[k])
+                self._keep(codec.decode(None), wanted, got[k])
                 codec.flush_buffers()
-        except av.error.FFmpegError as err:
-            raise InputError(f"{self.path}: video is damaged ({_one_line(err)})") from None
+            except av.error.FFmpegError as err:
+                raise InputError(f"{self.inputs[k][0]}: video is damaged ({_one_line(err)})") from None
+            seeks += packets.seeks - seeks_before
         for i in picks:
             if any(i not in g for g in got):
                 raise InputError(f"{self.path}: frame {i} cannot be decoded")
@@ -432,11 +451,11 @@ class _Decoders:
             for i in picks:
                 rgb = conv([g.pop(i) for g in got])
                 frames.append((i, (rgb, conv.native[0] if rgb.shape[1] < conv.native[0] else 0)))
-        return _DecodedRun(first, last, frames, decoded, packets.seeks - seeks_before)
+        return _DecodedRun(first, last, frames, decoded, seeks)
 
-    def _keep(self, k: int, frames, wanted: dict[int, int], got: dict) -> None:
-        """RGB of the wanted decoded ``frames`` of stream ``k``: equirectangular ones checked 2:1
-        at full size and shrunk past ``max_width``; others at full size for the converter."""
+    def _keep(self, frames, wanted: dict[int, int], got: dict) -> None:
+        """RGB of the wanted decoded ``frames``: equirectangular ones checked 2:1 at full size
+        and shrunk past ``max_width``; others at full size for the converter."""
         max_width = self.max_width
         for frame in frames:
             i = wanted.get(frame.pts)
@@ -473,59 +492,47 @@ class _DecodeOrder:
 
 
 class _PacketReader:
-    """Packets (stream slot, packet) of decode positions first..last of every stream, seeking
-    forward over what is not needed. Streams are positioned by the first one; with several
-    streams a run reads on until every stream has passed ``last``, so the next run seeks."""
+    """Packets of decode positions first..last of one stream, seeking forward over what is not needed."""
 
-    def __init__(self, container, streams, orders: list) -> None:
-        self.container, self.streams = container, list(streams)
-        self.stream = self.streams[0]
+    def __init__(self, container, stream, order: _DecodeOrder) -> None:
+        self.container, self.stream = container, stream
         self.seeks = 0
-        self.orders = orders
-        self.slot = {s.index: k for k, s in enumerate(self.streams)}
+        self.dec_pts, self.pos_of = order.dec_pts, order.pos_of
         self.demux = None
-        self.next_pos = 0  # decode position (first stream) of the next packet self.demux yields
+        self.next_pos = 0  # decode position of the next packet self.demux yields
 
     def _restart(self, first: int) -> None:
         """Seek to the key frame at decode position ``first`` (read from the start when it is 0)."""
         if self.demux is not None or first > 0:  # a fresh reader's first run need not be the video's
             self.seeks += 1
-            target = int(self.orders[0].dec_pts[first])
+            target = int(self.dec_pts[first])
             self.container.seek(target, stream=self.stream, backward=True, any_frame=False)
-        self.demux = self.container.demux(*self.streams)
+        self.demux = self.container.demux(self.stream)
         self.next_pos = -1  # unknown until the first packet
 
     def run(self, first: int, last: int) -> Iterator:
         if self.demux is None or self.next_pos != first:
             self._restart(first)
         retried = False
-        started = [False] * len(self.streams)
-        done = [False] * len(self.streams)
-        while not all(done):
+        while True:
             packet = next(self.demux, None)
             if packet is None:
                 return
             if packet.size == 0 or packet.pts is None:
                 continue
-            k = self.slot.get(packet.stream.index)
-            if k is None or done[k]:
+            pos = self.pos_of.get(int(packet.pts))
+            if pos is None:
                 continue
-            pos = self.orders[k].pos_of.get(int(packet.pts))
-            if pos is None or pos < first:
+            if pos < first:
                 continue
-            if pos > first and not started[k]:
+            if pos > first and self.next_pos == -1:
                 if retried:  # seek landed past the key frame twice: give up on this run
                     return
                 retried = True
                 self.container.seek(0, stream=self.stream, backward=True, any_frame=False)
-                self.demux = self.container.demux(*self.streams)
-                started = [False] * len(self.streams)
+                self.demux = self.container.demux(self.stream)
                 continue
-            started[k] = True
-            if k == 0:
-                self.next_pos = pos + 1
-            yield k, packet
+            self.next_pos = pos + 1
+            yield packet
             if pos >= last:
-                done[k] = True
-        if len(self.streams) > 1:
-            self.next_pos = -1  # the other streams read past the run: seek next time
+                return
