@@ -313,7 +313,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     map_params(params)
     if len(descs) == 0:
         raise InputError("no descriptors to map")
-    if params.method in ("verified", "verified-rules") and params.node_sim_th is None:
+    if params.method == "verified" and params.node_sim_th is None:
         from .calibrate import node_threshold
 
         params = replace(params, node_sim_th=node_threshold(descs.vectors))
@@ -325,21 +325,25 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     node_rows = make_nodes(descs.vectors, p.node_sim_th)
     columns = None if descs.columns is None else descs.columns[node_rows]
     frame_width = int(descs.meta.get("frame_width", 0))
+    poses = None
     if p.method == "verified":
-        from .loop_closure import detect_loops as verified
+        from .loops.verified import detect_loops as verified
 
-        loops = verified(descs.vectors[node_rows], p, node_rows=node_rows,
+        found = verified(descs.vectors[node_rows], p, node_rows=node_rows,
                          features=getattr(descs, "features", None), columns=columns,
                          shifts=descs.shifts[node_rows], frame_width=frame_width,
                          cache=descs.cache.setdefault(("nodes", p.node_sim_th), {}))
-    elif p.method == "verified-rules":
-        from .loops_verified import verified_loops
-
-        colours = None if descs.colours is None else descs.colours[node_rows]
-        loops = verified_loops(descs.vectors[node_rows], p, columns, descs.shifts[node_rows],
-                               frame_width, node_colours=colours)
+        loops, poses = found.loops, found.poses
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}
-    return TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
-                         extra_meta=extra)
+    if descs.meta.get("sampling") == "keyframes":   # the interval played no part
+        extra["sampling"] = "keyframes"
+    projection = (descs.meta.get("projection") or {}).get("name", "equirect")
+    if projection != "equirect":                     # converted to equirectangular as read
+        extra["projection"] = projection
+    topomap = TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
+                            extra_meta=extra)
+    if poses is not None:   # the pose graph's estimate, until ground truth or GPS replaces it
+        topomap.set_positions(poses[:, 0], poses[:, 1], poses[:, 2], kind="estimated")
+    return topomap

@@ -119,6 +119,17 @@ def check_describe(value: Any) -> dict:
         if d["topic"] is not None and not isinstance(d["topic"], str):
             raise _fail("describe.topic", "a topic name or null", d["topic"])
         out["topic"] = d["topic"]
+    if d.get("projection") is not None:   # the --projection text; checked as the option is
+        from .sources.projection import parse_projection
+
+        if not isinstance(d["projection"], str):
+            raise _fail("describe.projection", "a projection such as dual-fisheye:fov=200, or null", d["projection"])
+        parse_projection(d["projection"])
+        out["projection"] = d["projection"]
+    if "sampling" in d:
+        if d["sampling"] not in ("interval", "keyframes"):
+            raise _fail("describe.sampling", "'interval' or 'keyframes'", d["sampling"])
+        out["sampling"] = d["sampling"]
     for flag in ("shift", "skip_bad_frames"):
         if flag in d:
             if not isinstance(d[flag], bool):
