@@ -237,3 +237,18 @@ def test_an_mcap_of_another_encoding_is_refused_in_one_line(tmp_path):
     with pytest.raises(InputError) as err:
         open_recording(path)
     assert "json" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_an_unreadable_encoding_is_refused_in_one_line_that_says_what_to_do(tmp_path):
+    from rosbags.rosbag1 import Writer
+
+    ts1, _ = _stores()
+    depth = np.linspace(0.5, 9.0, H * W, dtype="<f4").reshape(H, W)   # metres
+    path = tmp_path / "depth.bag"
+    with Writer(path) as w:
+        c = w.add_connection("/depth", "sensor_msgs/msg/Image", typestore=ts1)
+        w.write(c, 1, ts1.serialize_ros1(_image(ts1, depth, "32FC1", 1, True), "sensor_msgs/msg/Image"))
+    with pytest.raises(InputError) as err:
+        open_recording(path)
+    text = str(err.value)
+    assert "32FC1" in text and "convert" in text and "\n" not in text

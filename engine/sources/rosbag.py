@@ -179,6 +179,10 @@ def message_to_rgb(msg: Any, msgtype: str) -> np.ndarray:
     except AssertionError:  # rosbags-image asserts on undecodable compressed data
         raise ValueError("not a decodable JPEG/PNG image") from None
     except (ImageError, cv2.error, TypeError) as err:
+        if msgtype != "sensor_msgs/msg/CompressedImage" and "not supported" in str(err):
+            # e.g. a 32FC1 depth image: no picture to place-recognise without a choice of scale
+            raise ValueError(f"{_one_line(err)}; panotopo reads colour, mono8/mono16 (8UC1/16UC1) "
+                             f"and bayer images: republish or convert the topic to one of those") from None
         raise ValueError(_one_line(err)) from None
 
 
