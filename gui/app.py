@@ -55,7 +55,8 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
         window.resize(int(ui.get("screenshot_width", 1600)), int(ui.get("screenshot_height", 1000)))
         from .window_layout import fit_to_screen
 
-        fit_to_screen(window)   # a picture of what fits this screen (a real one under Xvfb)
+        if app.platformName() != "offscreen":   # a real screen (Xvfb): a picture of what fits on it
+            fit_to_screen(window)
     window.show()
 
     if screenshot is None:

@@ -22,11 +22,12 @@ from .document import Document, LoopKey, LoopRow
 from .model.queue import KINDS, ReviewQueue, rank_key
 from .style import STATUS_COLORS
 
-COLUMNS = ("#", "Status", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
+COLUMNS = ("#", "Status", "Conf.", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
 COLUMN_TIPS = (
     "Rank by evidence: the engine's confidence (else calibrated score, else similarity), then inliers",
     "candidate = found, waiting for you; auto = accepted automatically; confirmed / rejected by you; "
     "manual = added by you",
+    "Confidence: the engine's ranking of the loop for review (what the queue is ordered by), where given",
     "Query: the earlier node of the pair (source frame in the tooltip)",
     "Match: the later node of the pair",
     "Calibrated descriptor score (standard deviations above the recording's background), where known",
@@ -34,7 +35,8 @@ COLUMN_TIPS = (
     "Similarity: cosine of the two node descriptors",
     "Relative heading between the two panoramas, in degrees (~: estimated from the images)",
 )
-RANK_COLUMN, STATUS_COLUMN = 0, 1
+(RANK_COLUMN, STATUS_COLUMN, CONFIDENCE_COLUMN, QUERY_COLUMN, MATCH_COLUMN, SCORE_COLUMN, INLIERS_COLUMN,
+ SIMILARITY_COLUMN, YAW_COLUMN) = range(len(COLUMNS))
 FILTERS = (("All loops", None), ("Undecided (candidate + auto)", {"candidate", "auto"}),
            ("Candidates", {"candidate"}), ("Auto", {"auto"}), ("Confirmed", {"confirmed"}),
            ("Rejected", {"rejected"}), ("Manual", {"manual"}), ("Kept (auto + confirmed + manual)",
@@ -80,7 +82,7 @@ class LoopTableModel(QAbstractTableModel):
         yaw = r.yaw if r.yaw is not None else self.doc.estimated_yaws.get(r.key)
         if col == RANK_COLUMN:
             return self.rank.get(r.key, 0)
-        return (None, r.status, (r.index_u, r.index_v), (r.index_v, r.index_u), _num(r.score),
+        return (None, r.status, _num(r.confidence), (r.index_u, r.index_v), (r.index_v, r.index_u), _num(r.score),
                 -1 if r.inliers is None else r.inliers, _num(r.similarity), _num(yaw))[col]
 
     def _sorted(self, rows: list[LoopRow]) -> list[LoopRow]:
@@ -100,7 +102,7 @@ class LoopTableModel(QAbstractTableModel):
     def yaw_changed(self, key: LoopKey) -> None:
         row = self._row_of.get(key)
         if row is not None:
-            self.dataChanged.emit(self.index(row, 7), self.index(row, 7))
+            self.dataChanged.emit(self.index(row, YAW_COLUMN), self.index(row, YAW_COLUMN))
 
     def row_of(self, key: LoopKey) -> Optional[int]:
         return self._row_of.get(key)
@@ -127,7 +129,7 @@ class LoopTableModel(QAbstractTableModel):
         if role == KEY_ROLE:
             return r.key
         if role == Qt.DisplayRole:
-            if col == 7 and r.yaw is None and r.key in self.doc.estimated_yaws:
+            if col == YAW_COLUMN and r.yaw is None and r.key in self.doc.estimated_yaws:
                 return f"~{self.doc.estimated_yaws[r.key]:+.1f}"  # estimated from the images
             return self._display(r, col)
         if role == Qt.TextAlignmentRole and col != STATUS_COLUMN:
@@ -145,15 +147,17 @@ class LoopTableModel(QAbstractTableModel):
             return str(self.rank.get(r.key, ""))
         if col == STATUS_COLUMN:
             return r.status
-        if col == 2:
+        if col == CONFIDENCE_COLUMN:
+            return "—" if r.confidence is None else f"{r.confidence:.2f}"
+        if col == QUERY_COLUMN:
             return r.u
-        if col == 3:
+        if col == MATCH_COLUMN:
             return r.v
-        if col == 4:
+        if col == SCORE_COLUMN:
             return "—" if r.score is None else f"{r.score:.3f}"
-        if col == 5:
+        if col == INLIERS_COLUMN:
             return "—" if r.inliers is None else str(r.inliers)
-        if col == 6:
+        if col == SIMILARITY_COLUMN:
             return "—" if math.isnan(r.similarity) else f"{r.similarity:.3f}"
         return "—" if r.yaw is None else f"{r.yaw:+.1f}"
 
@@ -254,10 +258,13 @@ class LoopTable(QWidget):
         self.view.setTabKeyNavigation(False)  # Tab moves on to the next widget (issue 14, defect 6)
         self.view.setAlternatingRowColors(True)
         self.view.verticalHeader().setVisible(False)
-        self.view.verticalHeader().setDefaultSectionSize(22)
+        # Compact rows: a long review needs many rows on screen (issue 43, defect 7).
+        self.view.verticalHeader().setDefaultSectionSize(self.view.fontMetrics().height() + 6)
+        self.view.verticalHeader().setMinimumSectionSize(self.view.fontMetrics().height() + 2)
         self.view.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
         self.view.horizontalHeader().setResizeContentsPrecision(100)  # look at 100 rows, not all
-        self.view.horizontalHeader().setStretchLastSection(True)
+        # No column stretches: a stretched last column (Yaw) took half the table's width.
+        self.view.horizontalHeader().setStretchLastSection(False)
         self.view.setToolTip("The review queue, best evidence first. Select one or many rows (Shift/Ctrl+click, "
                              "Ctrl+A), then C confirm, R reject; F: next undecided. Help ▸ Keyboard shortcuts")
         self.view.selectionModel().currentRowChanged.connect(self._current_changed)

@@ -133,23 +133,20 @@ class MainWindow(QMainWindow):
         self.tabs = QTabWidget()
         self.tabs.addTab(self.graph_view, "Graph")
         self.tabs.addTab(self.similarity_view, "Similarity matrix")
-        self.bottom_splitter = bottom = QSplitter(Qt.Vertical)   # table above the pair view (gui.window_layout)
-        bottom.addWidget(self.loop_table)
-        bottom.addWidget(self.pair_view)
-        bottom.setSizes([480, 520])
-        right = QSplitter(Qt.Vertical)
-        right.addWidget(self.tabs)
-        right.addWidget(bottom)
-        right.setSizes([520, 430])
+        # Left: what is looked at (the frame, the map, the node); right: the review queue
+        # above the pair view, each as wide as the column (gui.window_layout).
+        self.bottom_splitter = QSplitter(Qt.Vertical)
+        self.bottom_splitter.addWidget(self.loop_table)
+        self.bottom_splitter.addWidget(self.pair_view)
+        self.bottom_splitter.setSizes([480, 420])
         self.left_splitter = QSplitter(Qt.Vertical)
-        self.left_splitter.addWidget(self.frame_viewer)
-        self.left_splitter.addWidget(self.node_panel)
-        self.left_splitter.setStretchFactor(0, 3)
-        self.left_splitter.setStretchFactor(1, 2)
+        for widget, stretch in ((self.frame_viewer, 3), (self.tabs, 3), (self.node_panel, 1)):
+            self.left_splitter.addWidget(widget)
+            self.left_splitter.setStretchFactor(self.left_splitter.count() - 1, stretch)
         self.main_splitter = QSplitter(Qt.Horizontal)
         self.main_splitter.addWidget(self.left_splitter)
-        self.main_splitter.addWidget(right)
-        self.main_splitter.setSizes([560, 940])
+        self.main_splitter.addWidget(self.bottom_splitter)
+        self.main_splitter.setSizes([620, 880])
         self.main_splitter.setChildrenCollapsible(False)
         self.main_splitter.setStretchFactor(0, 2)
         self.main_splitter.setStretchFactor(1, 3)
@@ -222,6 +219,8 @@ class MainWindow(QMainWindow):
                                        "Select the next loop nobody has decided on yet")
         self.next_action = A("&Next loop", lambda: self.loop_table.step(1), "next")
         self.prev_action = A("&Previous loop", lambda: self.loop_table.step(-1), "previous")
+        self.focus_queue_action = A("&Go to the review queue", self.focus_queue, "focus_queue",
+                                    "Move the keyboard to the review queue (about 40 Tabs from the parameters)")
         self.reject_below_action = A("Reject all &below this one", self.reject_below, "reject_below",
                                      "Reject every undecided loop whose evidence is below the selected loop's")
         self.manual_action = A("&Add manual loop…", self.manual_loop_dialog, "manual_loop",
@@ -261,7 +260,7 @@ class MainWindow(QMainWindow):
         for a in (self.confirm_action, self.reject_action, self.reset_action):
             m.addAction(a)
         m.addSeparator()
-        for a in (self.next_undecided_action, self.next_action, self.prev_action):
+        for a in (self.next_undecided_action, self.next_action, self.prev_action, self.focus_queue_action):
             m.addAction(a)
         m.addSeparator()
         m.addAction(self.reject_below_action)
@@ -887,6 +886,12 @@ class MainWindow(QMainWindow):
             self.statusBar().showMessage("Every loop is decided", 5000)
             return
         self.loop_table.select_key(key)
+
+    def focus_queue(self) -> None:
+        """The keyboard to the review queue, on its current row (the first when none is)."""
+        self.loop_table.view.setFocus(Qt.ShortcutFocusReason)
+        if self.loop_table.selected_key() is None:
+            self.select_first_loop()
 
     def reject_below(self) -> None:
         """Reject every undecided loop ranked below the selected one (one undo step)."""

@@ -1,52 +1,52 @@
 """How the main window shares the screen between its views, from 1280x720 up.
 
-Beside the parameter docks, a 1280-px window leaves about 950 px for the views: too
-little for the frame viewer, the loop table (its Status column last) and the pair view
-side by side (issue 14, defects 3 and 4); on a 1920-px screen the pair view beside the
-table got ~450 px, its panoramas ~340 px wide. So the table and the pair view are
-stacked in the right column, both as wide as it: the table shows every column, and
-the pair view, wide and short, puts its two panoramas side by side (``PairView``
-picks that itself), each about half the column wide. In the left dock column the
-evaluation gets the height of its few rows and the parameters (a long, scrolling
-list with ``verified``'s thresholds) the rest.
+Left column: what is being looked at, the frame viewer (as tall as its two
+panoramas), the graph and similarity tabs, and the node panel. Right column: the
+review queue above the pair view, both as wide as the column. A long review lives
+in the right column (issue 43, defect 7: with the graph above the queue, the table
+showed 7-9 rows at 1500x950 and at 1920x1080): the pair view gets the height of its
+two panoramas side by side plus its texts and buttons, the queue all the rest (at
+1920x1080 well over 15 rows). In the left dock column the evaluation gets the height
+of its few rows and the parameters (a long, scrolling list) the rest.
 """
 
 from __future__ import annotations
 
 from PySide6.QtCore import QRect, Qt
 
-# Shares of the right column's height: graph, table, pair view (the pair view shows the
-# evidence a decision rests on, so it gets the most).
-RIGHT_SHARES = (0.36, 0.26, 0.38)
-# Share of the central width for the frame viewer column (at least its minimum width).
-LEFT_SHARE = 0.30
+# Share of the central width for the left column (at least its minimum width).
+LEFT_SHARE = 0.36
 # Height of the frame viewer's texts and controls beyond its two panoramas (pixels).
 VIEWER_EXTRA = 122
-# Height kept for the node panel under the frame viewer (pixels).
-NODE_PANEL_MIN = 160
+# Height kept for the node panel under the graph (pixels).
+NODE_PANEL_MIN = 150
+# Height of the pair view's title, evidence, caption and buttons beyond its panoramas (pixels).
+PAIR_EXTRA = 120
+# Most of the right column the pair view may take: the queue keeps the rest.
+PAIR_MAX_SHARE = 0.5
 
 
 def split_views(window) -> None:
-    """Size the columns and stack the loop table above the pair view (after the first layout)."""
+    """Size the columns (after the first layout, when real sizes are known)."""
     total = window.main_splitter.width()
     if total <= 400:   # not laid out yet
         return
     left = max(int(LEFT_SHARE * total), window.left_splitter.minimumSizeHint().width())
     window.main_splitter.setSizes([left, total - left])
-    window.bottom_splitter.setOrientation(Qt.Vertical)
-    right = window.main_splitter.widget(1)
-    height = right.height()
-    graph, table, _ = (int(share * height) for share in RIGHT_SHARES)
-    right.setSizes([graph, height - graph])
-    window.bottom_splitter.setSizes([table, height - graph - table])
+    right_width, height = total - left, window.bottom_splitter.height()
+    # Two panoramas (2:1) side by side across the column, then the texts and buttons.
+    pair = min(int(right_width / 4) + PAIR_EXTRA, int(PAIR_MAX_SHARE * height))
+    window.bottom_splitter.setSizes([height - pair, pair])
     docks = (window.params_dock, window.eval_dock)
     if all(d.isVisible() and not d.isFloating() for d in docks):
         evaluation = window.eval_dock.sizeHint().height()
         window.resizeDocks(list(docks), [sum(d.height() for d in docks) - evaluation, evaluation], Qt.Vertical)
     column = window.left_splitter.height()
-    if column > NODE_PANEL_MIN + 140:   # the viewer as tall as its two panoramas, the node panel below
-        viewer = min(left + VIEWER_EXTRA, column - NODE_PANEL_MIN)
-        window.left_splitter.setSizes([viewer, column - viewer])
+    viewer = min(left // 2 + VIEWER_EXTRA, max(column // 2, 0))
+    node = NODE_PANEL_MIN
+    graph = column - viewer - node
+    if graph > 120:
+        window.left_splitter.setSizes([viewer, graph, node])
 
 
 # Room a window manager takes around a window: its frame, its title bar (pixels).

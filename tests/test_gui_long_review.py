@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("pytestqt")
 
 from PySide6.QtCore import QSettings, Qt  # noqa: E402
-from PySide6.QtWidgets import QMessageBox  # noqa: E402
+from PySide6.QtWidgets import QMessageBox, QTableWidget  # noqa: E402
 
 from engine.session_fields import LABEL_MAX  # noqa: E402
 from gui.main_window import MainWindow  # noqa: E402
@@ -158,3 +158,49 @@ def test_the_graph_is_the_map_as_decided_and_is_redrawn_after_each_decision(qtbo
     w.decide("rejected")
     assert g.layout_worker.wait(30_000)
     assert gap() > 0.5 * (n - 1), "rejected: the loop is gone from the drawing"
+
+
+def _queue(n_loops: int = 60, nodes: int = 400):
+    return make_map([dict(a=i, b=i + 300, status="candidate", score=0.5, confidence=0.5 + i / 100, yaw=12.5)
+                     for i in range(n_loops)], nodes)
+
+
+@pytest.mark.parametrize("size", [(1920, 1040), (1500, 950)])
+def test_the_queue_is_long_enough_to_review_in(qtbot, make_window, size):
+    """Defect 7: 7-9 rows at 1500x950 and maximised at 1920x1080; Yaw took half the table's
+    width; no confidence column although the queue is ranked by confidence."""
+    from gui.loop_table import COLUMNS
+
+    w = make_window(size)
+    qtbot.waitExposed(w)
+    qtbot.wait(50)        # the first split happens after the first layout
+    w.doc.replace_map(_queue())
+    qtbot.wait(20)
+    view = w.loop_table.view
+    rows = view.viewport().height() // view.rowHeight(0)
+    assert rows >= 15, f"{rows} rows of the queue on screen at {size}"
+    header = view.horizontalHeader()
+    assert header.sectionSize(COLUMNS.index("Yaw°")) <= view.viewport().width() / 4
+    conf = COLUMNS.index("Conf.")
+    assert w.loop_table.proxy.index(0, conf).data() == "1.09", "the best-ranked loop's confidence is shown"
+
+
+def test_one_key_takes_the_keyboard_to_the_queue_and_the_help_lists_it(qtbot, make_window):
+    """Defect 7: about 40 Tabs from the parameter panel to the table, and no key to jump there."""
+    from gui.model.keys import SHORTCUTS
+    from gui.shortcuts_dialog import ShortcutsDialog
+
+    w = make_window()
+    w.doc.replace_map(_queue(10, 330))
+    w.activateWindow()
+    w.params_panel.node_sim_th.setFocus()
+    qtbot.waitUntil(lambda: w.params_panel.node_sim_th.hasFocus(), timeout=2000)
+    qtbot.keyClick(w.params_panel.node_sim_th, Qt.Key_L, Qt.ControlModifier)
+    assert w.loop_table.view.hasFocus()
+    assert w.loop_table.selected_key() is not None
+    entry = next(s for s in SHORTCUTS if s.action == "focus_queue")
+    dialog = ShortcutsDialog(w.shortcuts, w)
+    qtbot.addWidget(dialog)
+    table = dialog.findChild(QTableWidget)
+    texts = {table.item(r, c).text() for r in range(table.rowCount()) for c in range(table.columnCount())}
+    assert entry.text in texts and entry.shown in texts

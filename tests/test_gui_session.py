@@ -617,13 +617,15 @@ def test_shortcuts_dialog_lists_the_curation_keys(qtbot):
 
 
 def test_table_sorting_and_status_filter(qtbot, make_window, recording):
+    from gui.loop_table import COLUMNS
+
     w = make_window()
     open_and_run(qtbot, w, recording["video"])
     table = w.loop_table
     table.step(1)
     selected = table.selected_key()
-    table.view.sortByColumn(6, Qt.DescendingOrder)  # similarity, highest first
-    shown = [table.proxy.index(r, 6).data() for r in range(table.proxy.rowCount())]
+    table.view.sortByColumn(COLUMNS.index("Sim."), Qt.DescendingOrder)  # similarity, highest first
+    shown = [table.proxy.index(r, COLUMNS.index("Sim.")).data() for r in range(table.proxy.rowCount())]
     assert shown == sorted(shown, reverse=True)
     assert table.selected_key() == selected  # the selection follows its row
     qtbot.keyClick(table.view, Qt.Key_C)

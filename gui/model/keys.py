@@ -44,6 +44,7 @@ SHORTCUTS: tuple[Shortcut, ...] = (
     _s("previous", "Loops", ("K", "PgUp"), "Previous loop in the table (wraps to the last)"),
     _s("reject_below", "Loops", ("Shift+R",), "Reject every undecided loop ranked below the selected one"),
     _s("select_all", "Loops", ("Ctrl+A",), "Select every loop shown (the filter applies)", fixed=True),
+    _s("focus_queue", "Loops", ("Ctrl+L",), "Move the keyboard to the review queue (from any panel)"),
     _s("manual_loop", "Loops", ("M",), "Add a manual loop between two nodes"),
     _s("ctrl_click", "Loops", ("Ctrl+click",), "Manual loop from the current node to the clicked node (asks first)",
        fixed=True),
