@@ -21,10 +21,11 @@ Projections (``Projection.name``):
   conversion keeps each lens up to the face's centre line (no blending) and drops the copy.
   ``layout="eac"`` is a plain 3 x 2 EAC frame (FFmpeg's, YouTube's).
 
-``Converter`` does the geometry with FFmpeg's ``v360`` filter (bundled with PyAV) on RGB
-frames: the layout is assembled in numpy (hstack of two streams, GoPro overlap columns
-dropped, lens rolls), then one ``v360`` pass to equirectangular, then area averaging to the
-width asked for. A converter holds one filter graph: one per thread.
+``Converter`` does the geometry with FFmpeg's ``v360`` filter (bundled with PyAV): the layout
+is assembled in numpy (hstack of two streams, GoPro overlap columns dropped, lens rolls; on
+the YUV planes of decoded video frames, on RGB for other readers), then one ``v360`` pass to
+equirectangular, then area averaging to the width asked for. A converter holds its filter
+graphs: one converter per thread.
 
 ``parse_projection`` reads the ``--projection`` option: ``NAME[:key=value,...]`` with keys
 ``fov`` (dual-fisheye lens field of view), ``roll`` (``A/B``, the two lens rolls) and
@@ -275,11 +276,15 @@ def gopro_columns(width: int, height: int, extra: int) -> np.ndarray:
 
 
 class Converter:
-    """Frames of projection ``p`` (one RGB array per stream) -> equirectangular RGB.
+    """Frames of projection ``p`` (one per stream) -> equirectangular RGB.
 
-    ``out_width``: width of the panorama delivered (2:1); None = the native size. ``v360``
-    renders at most twice that width, then area averaging brings it down (a bilinear
-    remap straight to a much smaller size would alias). Not thread-safe: one per thread.
+    Frames are RGB arrays (any reader) or decoded ``av.VideoFrame`` objects (the video
+    reader): those stay in their YUV format up to the small output, the layout assembled by
+    FFmpeg's crop / hstack / vstack in the same graph as ``v360`` (numpy only for turned lens
+    images), which costs a fraction of converting 5-6K pictures to RGB first. ``out_width``: width of the panorama
+    delivered (2:1); None = the native size. ``v360`` renders at most twice that width, then
+    area averaging brings it down (a bilinear remap straight to a much smaller size would
+    alias). Not thread-safe: one per thread.
     """
 
     def __init__(self, p: Projection, shapes: Sequence[tuple[int, int]], out_width: Optional[int] = None) -> None:
@@ -294,12 +299,8 @@ class Converter:
         self.out_width -= self.out_width % 2
         self.render_width = min(self.native[0], 2 * self.out_width)
         self.render_width -= self.render_width % 2
-        self._cols = None
-        if p.layout == "gopro":
-            w, h = self.shapes[0]
-            self._cols = gopro_columns(w, h, p.extra)
-        self._graph = None
-        self._in_shape: Optional[tuple] = None
+        self._cols: dict = {}
+        self._graphs: dict = {}
 
     def _v360_args(self) -> str:
         w, h = self.render_width, self.render_width // 2
@@ -308,24 +309,22 @@ class Converter:
             return f"input=dfisheye:output=e:ih_fov={fov}:iv_fov={fov}:w={w}:h={h}"
         return f"input=eac:output=e:w={w}:h={h}"
 
-    def _build(self, shape: tuple) -> None:
-        import av
+    def _gopro_cols(self, scale: int) -> np.ndarray:
+        if scale not in self._cols:
+            w, h = self.shapes[0]
+            if w % scale or h % scale or self.p.extra % scale:
+                raise InputError(f"GoPro EAC strips of {w}x{h} cannot be split at chroma resolution")
+            self._cols[scale] = gopro_columns(w // scale, h // scale, self.p.extra // scale)
+        return self._cols[scale]
 
-        g = av.filter.Graph()
-        src = g.add_buffer(width=shape[1], height=shape[0], format="rgb24", time_base=Fraction(1, 1000))
-        v360 = g.add("v360", self._v360_args())
-        sink = g.add("buffersink")
-        src.link_to(v360)
-        v360.link_to(sink)
-        g.configure()
-        self._graph, self._src, self._sink, self._in_shape = g, src, sink, shape
-
-    def assemble(self, images: Sequence[np.ndarray]) -> np.ndarray:
-        """The one image ``v360`` reads (layout module doc), as RGB uint8."""
+    def assemble(self, images: Sequence[np.ndarray], scale: int = 1) -> np.ndarray:
+        """The one image ``v360`` reads (layout module doc) from one image per stream: RGB, or
+        one plane of YUV (``scale`` 2 for the half-size chroma planes)."""
         if len(images) != self.p.streams:
             raise InputError(f"{self.p.name}: expected {self.p.streams} image(s), got {len(images)}")
         if self.p.layout == "gopro":
-            return np.vstack([np.take(img, self._cols, axis=1) for img in images])
+            cols = self._gopro_cols(scale)
+            return np.vstack([np.take(img, cols, axis=1) for img in images])
         if self.p.name == "dual-fisheye":
             if self.p.layout == "two-streams":
                 lenses = list(images)
@@ -339,17 +338,86 @@ class Converter:
                 return np.hstack(lenses)
         return images[0]
 
-    def __call__(self, images: Sequence[np.ndarray]) -> np.ndarray:
+    def __call__(self, images: Sequence) -> np.ndarray:
         import av
 
-        img = np.ascontiguousarray(self.assemble(images))
-        if self._graph is None or img.shape != self._in_shape:
-            self._build(img.shape)
-        self._src.push(av.VideoFrame.from_ndarray(img, format="rgb24"))
-        out = self._sink.pull()
+        if images and isinstance(images[0], av.VideoFrame):
+            if any(self.p.roll):   # turned lens images: assembled in numpy, plane by plane
+                frames = [self._frame_of(list(images))]
+            else:
+                frames = list(images)
+        else:
+            frames = [av.VideoFrame.from_ndarray(np.ascontiguousarray(self.assemble(images)), format="rgb24")]
+        _, srcs, sink = self._stacked_graph(frames)
+        for src, frame in zip(srcs, frames):
+            src.push(frame)
+        out = sink.pull()
         if self.render_width > self.out_width:
-            out = out.reformat(width=self.out_width, height=self.out_width // 2, format="rgb24", interpolation="AREA")
+            return out.reformat(width=self.out_width, height=self.out_width // 2, format="rgb24",
+                                interpolation="AREA").to_ndarray()
         return out.to_ndarray(format="rgb24")
+
+    def _stacked_graph(self, frames: list):
+        """The filter graph for ``frames`` (one per input of the graph): with two, FFmpeg itself
+        assembles the layout (crop, hstack, vstack) before ``v360``; with one, it is the picture."""
+        key = tuple((f.width, f.height, f.format.name) for f in frames)
+        if key in self._graphs:
+            return self._graphs[key]
+        import av
+
+        g = av.filter.Graph()
+        srcs = [g.add_buffer(width=f.width, height=f.height, format=f.format.name, time_base=Fraction(1, 1000))
+                for f in frames]
+        if len(frames) == 1:
+            tail = srcs[0]
+        elif self.p.layout == "gopro":
+            w, h = frames[0].width, frames[0].height
+            f, extra = h, self.p.extra
+            side = f + extra
+            cuts = [(0, f // 2), (f // 2 + extra, side + f + f // 2), (side + f + f // 2 + extra, w)]
+            strips = []
+            for src in srcs:   # each strip: its three square faces side by side
+                split = g.add("split", str(len(cuts)))
+                src.link_to(split)
+                stack = g.add("hstack", f"inputs={len(cuts)}")
+                for k, (x0, x1) in enumerate(cuts):
+                    crop = g.add("crop", f"w={x1 - x0}:h={h}:x={x0}:y=0")
+                    split.link_to(crop, k, 0)
+                    crop.link_to(stack, 0, k)
+                strips.append(stack)
+            tail = g.add("vstack", "inputs=2")
+            for k, strip in enumerate(strips):
+                strip.link_to(tail, 0, k)
+        else:
+            tail = g.add("hstack", "inputs=2")
+            for k, src in enumerate(srcs):
+                src.link_to(tail, 0, k)
+        v360 = g.add("v360", self._v360_args())
+        sink = g.add("buffersink")
+        tail.link_to(v360)
+        v360.link_to(sink)
+        g.configure()
+        self._graphs[key] = (g, srcs, sink)
+        return self._graphs[key]
+
+    def _frame_of(self, frames: list):
+        """The assembled picture of decoded frames, in YUV 4:2:0, by numpy (turned lenses)."""
+        import av
+
+        fmt = frames[0].format.name if frames[0].format.name in ("yuv420p", "yuvj420p") else "yuv420p"
+        planes = []
+        for f in frames:
+            arr = f.to_ndarray(format=fmt)
+            h, w = arr.shape[0] * 2 // 3, arr.shape[1]
+            q = (h // 2) * (w // 2)
+            flat = arr[h:].reshape(-1)
+            planes.append((arr[:h], flat[:q].reshape(h // 2, w // 2), flat[q:2 * q].reshape(h // 2, w // 2)))
+        y = self.assemble([p[0] for p in planes], 1)
+        u = self.assemble([p[1] for p in planes], 2)
+        v = self.assemble([p[2] for p in planes], 2)
+        h, w = y.shape
+        packed = np.concatenate([y.reshape(-1), u.reshape(-1), v.reshape(-1)]).reshape(h * 3 // 2, w)
+        return av.VideoFrame.from_ndarray(packed, format=fmt)
 
 
 def _rolled(lens: np.ndarray, degrees: float) -> np.ndarray:

@@ -461,8 +461,8 @@ class _Decoders:
             i = wanted.get(frame.pts)
             if i is None:
                 continue
-            if self.projection is not None:
-                got[i] = frame.to_ndarray(format="rgb24")
+            if self.projection is not None:   # converted (from YUV) when every input has its frame
+                got[i] = frame
                 continue
             w, h = int(frame.width), int(frame.height)
             check_equirectangular_size(w, h, f"{self.path}: frame {i}")
