@@ -119,14 +119,16 @@ def test_ros1_profile_mcap_reads_images_stamps_and_odometry(tmp_path, compressio
     assert np.allclose(poses.x, 0.5 * np.arange(4)) and np.allclose(poses.yaw, 0.3 * np.arange(4))
 
 
-@pytest.mark.parametrize("profile, compression", [("ros2", "zstd"), ("ros2", "lz4"), ("", "zstd")])
-def test_cdr_mcap_from_the_mcap_writer(tmp_path, profile, compression):
-    """ros2 profile (rosbags' reader) and no profile (the mcap reader), short type names."""
+@pytest.mark.parametrize("profile, compression, short", [
+    ("ros2", "zstd", False), ("ros2", "lz4", False), ("ros2", "zstd", True), ("", "zstd", True)])
+def test_cdr_mcap_from_the_mcap_writer(tmp_path, profile, compression, short):
+    """ros2 profile (rosbags' reader) and no profile (the mcap reader); type names spelled
+    sensor_msgs/msg/Image or sensor_msgs/Image."""
     _, ts2 = _stores()
     frames = make_frames(3, W, H)
     msgs = [("/cam", "sensor_msgs/msg/Image", T0 * 10**9 + k, _image(ts2, f, "rgb8", T0 * 10**9 + k, False))
             for k, f in enumerate(frames)]
-    path = write_mcap(tmp_path / "r2.mcap", profile, compression, msgs, short_names=(profile == ""))
+    path = write_mcap(tmp_path / "r2.mcap", profile, compression, msgs, short_names=short)
     assert [m for _, m, _ in list_image_topics(path)] == ["sensor_msgs/msg/Image"]
     for got, want in zip(_frames_of(path), frames):
         assert np.array_equal(got, want)

@@ -127,6 +127,15 @@ def _imu_bag(path: Path, stamps, yaws, with_orientation: bool, extra_odom: bool 
     return path
 
 
+def test_one_orientation_on_every_message_is_a_placeholder(tmp_path):
+    """GPS-only odometry: positions change, the orientation is the identity quaternion throughout."""
+    frames = make_frames(4, W, H)
+    poses = Poses(t=100.0 + np.arange(20) * 0.1, x=np.linspace(0, 5, 20), y=np.zeros(20), yaw=np.zeros(20))
+    path = write_ros1_bag(tmp_path / "gps.bag", frames, poses.t[::5], poses=poses)
+    with BagSource(path) as src:
+        assert src.headings() is None and "one orientation" in src.heading_note
+
+
 def test_imu_orientation_is_used_unless_the_driver_says_it_has_none(tmp_path):
     stamps = 100.0 + np.arange(5) * 0.1
     yaws = np.radians([10.0, 20.0, 40.0, 80.0, 100.0])

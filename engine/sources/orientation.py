@@ -5,7 +5,13 @@ A bag's ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped``,
 the type) gives the yaw of the robot; the camera, mounted on it, turns with it. The topic is
 used only when it is the one such topic of the bag (several: the caller names one, or the
 image decides the shift); an Imu message whose ``orientation_covariance[0]`` is -1 (the
-driver's "no orientation") or whose quaternion is zero is left out.
+driver's "no orientation") or whose quaternion is zero is left out, and a topic whose every
+message has the very same orientation (GPS-only odometry writes the identity quaternion) is
+not a direction (``BagSource.headings``).
+
+Odometry yaw is counted from where the recording started (unless the robot localises in a
+map frame or has a compass): it aligns the frames of one recording with each other, and two
+recordings only when they share that reference.
 
 Headings come out as ``engine.frames.FrameSource.headings`` wants them: degrees clockwise
 (``-yaw``), at the frame stamps, interpolated on the unwrapped yaw. A frame more than

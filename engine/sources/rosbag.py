@@ -301,6 +301,11 @@ class BagSource(IndexedSource):
                 return None
         finally:
             reader.close()
+        if yaw.size > 1 and np.all(yaw == yaw[0]):
+            # GPS-only odometry and some drivers fill the orientation with one value (the
+            # identity quaternion) on every message: a placeholder, not a direction
+            self.heading_note = f"{topic} ({msgtype}) has one orientation on every message"
+            return None
         found = headings_at(t, yaw, self._stamps)
         if found is None:
             self.heading_note = f"{topic} ({msgtype}) does not cover every frame"
