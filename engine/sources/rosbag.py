@@ -37,6 +37,8 @@ from .orientation import POSE_TYPES, headings_at, orientation_topics, read_yaw
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 ROS2_STORAGE_SUFFIXES = (".db3", ".mcap")
+# Storage files of a bag recorded with --compression-mode file (only metadata.yaml says so).
+ROS2_PACKED_SUFFIXES = (".db3.zstd", ".mcap.zstd")
 
 
 # --- opening bags and choosing topics -------------------------------------------
@@ -46,7 +48,8 @@ def is_ros2_bag_dir(path: Path) -> bool:
     """A directory holding a ROS2 bag (metadata.yaml or storage files)."""
     return path.is_dir() and (
         (path / "metadata.yaml").exists()
-        or any(p.suffix in ROS2_STORAGE_SUFFIXES for p in path.iterdir())
+        or any(p.suffix in ROS2_STORAGE_SUFFIXES or p.name.endswith(ROS2_PACKED_SUFFIXES)
+               for p in path.iterdir())
     )
 
 
@@ -60,6 +63,10 @@ def _reader_path(path: Path) -> Path:
         raise InputError(f"{path}: no such file or directory")
     if path.is_dir() and not (path / "metadata.yaml").exists():
         files = sorted(p for p in path.iterdir() if p.suffix in ROS2_STORAGE_SUFFIXES)
+        packed = sorted(p for p in path.iterdir() if p.name.endswith(ROS2_PACKED_SUFFIXES))
+        if not files and packed:
+            raise InputError(f"{path}: a ROS2 bag compressed whole (--compression-mode file) without "
+                             f"its metadata.yaml; decompress it first with 'zstd -d {packed[0]}'")
         if len(files) != 1:
             raise InputError(
                 f"{path}: not a ROS2 bag (no metadata.yaml and "
