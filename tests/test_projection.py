@@ -211,3 +211,12 @@ def test_an_insta360_recording_in_two_files_opens_from_either(tmp_path):
         with open_recording(alone / lens0.name) as src:
             list(src.frames(1.0))
     assert "not an equirectangular" in str(err.value) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("name,option", [("gopro", "dual-fisheye"), ("insv", "eac"), ("insv2", "eac:layout=eac")])
+def test_a_projection_the_frames_cannot_have_is_refused_in_one_line(files, name, option):
+    with pytest.raises(InputError) as err:
+        with open_recording(files[name], projection=option) as src:
+            list(src.frames(1.0))
+    message = str(err.value)
+    assert files[name].name in message and "--projection" in message and "\n" not in message

@@ -32,7 +32,10 @@ class ProjectedSource(FrameSource):
         self.inner, self.projection, self.path = inner, projection, inner.path
         self.reader_threads = inner.reader_threads
         w, h = inner.resolution
-        self._resolution = native_size(projection, [(w, h)])
+        try:
+            self._resolution = native_size(projection, [(w, h)])
+        except InputError as err:
+            raise InputError(f"{inner.path}: {err}") from None
         self._converters: dict = {}
         self._lock = threading.Lock()
 

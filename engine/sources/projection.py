@@ -248,9 +248,28 @@ def detect_projection(path: Path, given: Optional[Projection] = None) -> Project
 
 # --------------------------------------------------------------------------- geometry
 
+def check_shapes(p: Projection, shapes: Sequence[tuple[int, int]]) -> None:
+    """InputError unless frames of these (width, height), one per stream, can be ``p``: two
+    square lens images side by side (2:1) or one per stream, a 3:2 EAC frame, GoPro strips."""
+    w, h = shapes[0]
+    if any(tuple(s) != (w, h) for s in shapes[1:]):
+        raise InputError(f"{p.name}: its video streams differ in size ({', '.join(f'{a}x{b}' for a, b in shapes)})")
+    expected = {("dual-fisheye", "side-by-side"): (w == 2 * h, "two square lens images side by side (2:1)"),
+                ("dual-fisheye", "two-streams"): (w == h, "one square lens image per stream"),
+                ("eac", "eac"): (2 * w == 3 * h, "a 3:2 frame of six faces")}
+    ok, what = expected.get((p.name, p.layout), (True, ""))
+    if not ok:
+        raise InputError(f"frames of {w}x{h} are not {p.name} ({p.layout}): expected {what}; "
+                         f"check --projection")
+    if p.layout == "gopro":
+        gopro_columns(w, h, p.extra)
+
+
 def native_size(p: Projection, shapes: Sequence[tuple[int, int]]) -> tuple[int, int]:
     """(width, height) of the equirectangular panorama at the input's own resolution:
-    dual fisheye as wide as both lens images together, EAC four faces wide."""
+    dual fisheye as wide as both lens images together, EAC four faces wide. InputError when
+    the shapes cannot be ``p`` (``check_shapes``)."""
+    check_shapes(p, shapes)
     w, h = shapes[0]
     if p.name == "dual-fisheye":
         width = 2 * w if p.layout == "two-streams" else w

@@ -39,7 +39,10 @@ class Video360Source(FrameSource):
                                               inputs=lens_inputs(self.path, projection))
         except video_av.AvUnavailable as err:
             raise InputError(f"{self.path}: cannot read this {projection.name} video ({err})") from None
-        self._resolution = self.sampler.resolution
+        try:
+            self._resolution = self.sampler.resolution
+        except InputError as err:
+            raise InputError(f"{self.path}: {err}") from None
         frame_size(*self._resolution, str(self.path))
         self.reader_threads = video_av.DECODE_THREADS
         self.notes: list[str] = []
