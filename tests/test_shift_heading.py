@@ -146,18 +146,44 @@ def test_imu_orientation_is_used_unless_the_driver_says_it_has_none(tmp_path):
         assert src.headings() is None
 
 
-def test_several_orientation_topics_need_a_choice(tmp_path):
+def test_odometry_comes_before_imu_and_two_odometries_need_a_choice(tmp_path):
     stamps = 100.0 + np.arange(4) * 0.1
     yaws = np.radians([0.0, 30.0, 60.0, 90.0])
     path = _imu_bag(tmp_path / "two.bag", stamps, yaws, True, extra_odom=True)
     with BagSource(path) as src:
-        assert src.headings() is None and "several orientation topics" in src.heading_note
-    with BagSource(path, heading_topic="/odom") as src:
         assert np.allclose(src.headings(), (-np.degrees(yaws)) % 360.0)
+        assert src.heading_note.startswith("/odom ")
+    with BagSource(path, heading_topic="/imu/data") as src:
+        assert np.allclose(src.headings(), (-np.degrees(yaws)) % 360.0)
+        assert src.heading_note.startswith("/imu/data ")
+    poses = _turning_poses(20)
+    frames = make_frames(4, W, H)
+    both = write_ros1_bag(tmp_path / "odoms.bag", frames, poses.t[::5], poses=poses, pose_topic="/odom")
+    twice = _second_odometry(both, tmp_path / "odoms2.bag")
+    with BagSource(twice) as src:
+        assert src.headings() is None and "several orientation topics" in src.heading_note
+    with BagSource(twice, heading_topic="/odometry/filtered") as src:
+        assert src.headings() is not None
     with BagSource(path, heading_topic="/nope") as src:
         with pytest.raises(InputError) as err:
             src.headings()
         assert "/imu/data, /odom" in str(err.value) and "\n" not in str(err.value)
+
+
+def _second_odometry(bag: Path, out: Path) -> Path:
+    """``bag`` with its /odom messages written again on /odometry/filtered."""
+    from rosbags.rosbag1 import Reader, Writer
+
+    with Reader(bag) as reader, Writer(out) as writer:
+        conns = {}
+        for conn, t, raw in reader.messages():
+            targets = [conn.topic] + (["/odometry/filtered"] if conn.topic == "/odom" else [])
+            for topic in targets:
+                if topic not in conns:
+                    conns[topic] = writer.add_connection(topic, conn.msgtype, msgdef=conn.msgdef.data,
+                                                         md5sum=conn.digest)
+                writer.write(conns[topic], t, raw)
+    return out
 
 
 def _photo(path: Path, rgb: np.ndarray, second: int, heading: float) -> None:

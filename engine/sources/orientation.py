@@ -2,9 +2,11 @@
 
 A bag's ``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped``,
 ``geometry_msgs/PoseWithCovarianceStamped`` or ``sensor_msgs/Imu`` topic (either spelling of
-the type) gives the yaw of the robot; the camera, mounted on it, turns with it. The topic is
-used only when it is the one such topic of the bag (several: the caller names one, or the
-image decides the shift); an Imu message whose ``orientation_covariance[0]`` is -1 (the
+the type) gives the yaw of the robot; the camera, mounted on it, turns with it. Unless the
+caller names a topic, the kinds are tried in ``TIERS`` order (odometry, often fused, before
+poses before a bare IMU): a kind with one topic is tried, a kind with several is ambiguous
+and ends the search (the image then decides the shift); a topic that gives no headings (see
+below) passes on to the next kind. An Imu message whose ``orientation_covariance[0]`` is -1 (the
 driver's "no orientation") or whose quaternion is zero is left out, and a topic whose every
 message has the very same orientation (GPS-only odometry writes the identity quaternion) is
 not a direction (``BagSource.headings``).
@@ -33,6 +35,7 @@ POSE_TYPES = (   # engine.sources.rosbag.POSE_TYPES is this
 )
 IMU_TYPE = "sensor_msgs/msg/Imu"
 ORIENTATION_TYPES = POSE_TYPES + (IMU_TYPE,)
+TIERS = (("nav_msgs/msg/Odometry",), POSE_TYPES[1:], (IMU_TYPE,))
 # Longest time (s) between a frame and an orientation sample it is interpolated from.
 MAX_GAP_S = 0.5
 
@@ -40,6 +43,17 @@ MAX_GAP_S = 0.5
 def orientation_topics(reader: Any) -> list[str]:
     """Topics of the bag whose messages carry an orientation, by name."""
     return sorted({c.topic for c in reader.connections if c.msgtype in ORIENTATION_TYPES})
+
+
+def candidate_topics(reader: Any) -> tuple[list[str], str]:
+    """(topics to try in order, a note when a kind had several topics) by ``TIERS``."""
+    tried: list[str] = []
+    for kinds in TIERS:
+        topics = sorted({c.topic for c in reader.connections if c.msgtype in kinds})
+        if len(topics) > 1:
+            return tried, f"several orientation topics of one kind ({', '.join(topics)}), none chosen"
+        tried += topics
+    return tried, ""
 
 
 def quaternion_yaw(q: Any) -> float:

@@ -33,7 +33,7 @@ from ..errors import InputError
 from ..frames import Frame, IndexedSource, check_equirectangular, sample_indices
 from ..validate import frame_size, image_file_size
 from .bag_reader import BagFormatError, BagReader, open_reader
-from .orientation import POSE_TYPES, headings_at, orientation_topics, read_yaw
+from .orientation import POSE_TYPES, candidate_topics, headings_at, orientation_topics, read_yaw
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 ROS2_STORAGE_SUFFIXES = (".db3", ".mcap")
@@ -257,9 +257,9 @@ def recovery_hint(path: Path) -> str:
 class BagSource(IndexedSource):
     """Frames of one image topic of a ROS1 or ROS2 bag.
 
-    ``headings()`` come from the bag's orientation topic (``orientation.py``): the one
-    Odometry / PoseStamped / PoseWithCovarianceStamped / Imu topic, or ``heading_topic``
-    when given; ``heading_note`` says which, or why none.
+    ``headings()`` come from the bag's orientation topic (``orientation.py``: Odometry before
+    PoseStamped / PoseWithCovarianceStamped before Imu), or ``heading_topic`` when given;
+    ``heading_note`` says which, or why none.
     """
 
     def __init__(self, path: str | Path, topic: Optional[str] = None,
@@ -289,35 +289,41 @@ class BagSource(IndexedSource):
 
     def _read_headings(self) -> Optional[np.ndarray]:
         reader = open_bag(self.path)
+        notes: list[str] = []
         try:
-            topics = orientation_topics(reader)
-            topic = self._heading_topic
-            if topic is not None and topic not in topics:
-                raise InputError(f"{self.path}: no orientation topic {topic!r}; orientation topics: "
-                                 f"{', '.join(topics) or 'none'}")
-            if topic is None:
-                if len(topics) != 1:
-                    self.heading_note = (f"several orientation topics ({', '.join(topics)}), none chosen"
-                                         if topics else "")
-                    return None
-                topic = topics[0]
-            try:
-                t, yaw, msgtype = read_yaw(reader, topic)
-            except Exception as err:  # the images are fine: the shift falls back to the image
-                self.heading_note = f"{topic} unreadable ({_one_line(err)})"
-                return None
+            if self._heading_topic is not None:
+                topics = orientation_topics(reader)
+                if self._heading_topic not in topics:
+                    raise InputError(f"{self.path}: no orientation topic {self._heading_topic!r}; "
+                                     f"orientation topics: {', '.join(topics) or 'none'}")
+                candidates, ambiguous = [self._heading_topic], ""
+            else:
+                candidates, ambiguous = candidate_topics(reader)
+            for topic in candidates:
+                found = self._headings_of(reader, topic, notes)
+                if found is not None:
+                    self.heading_note = notes[-1]
+                    return found
         finally:
             reader.close()
+        self.heading_note = "; ".join(notes + ([ambiguous] if ambiguous else []))
+        return None
+
+    def _headings_of(self, reader: Any, topic: str, notes: list[str]) -> Optional[np.ndarray]:
+        """Headings at the frames from ``topic``, or None with the reason added to ``notes``."""
+        try:
+            t, yaw, msgtype = read_yaw(reader, topic)
+        except Exception as err:  # the images are fine: the shift falls back to the image
+            notes.append(f"{topic} unreadable ({_one_line(err)})")
+            return None
         if yaw.size > 1 and np.all(yaw == yaw[0]):
             # GPS-only odometry and some drivers fill the orientation with one value (the
             # identity quaternion) on every message: a placeholder, not a direction
-            self.heading_note = f"{topic} ({msgtype}) has one orientation on every message"
+            notes.append(f"{topic} ({msgtype}) has one orientation on every message")
             return None
         found = headings_at(t, yaw, self._stamps)
-        if found is None:
-            self.heading_note = f"{topic} ({msgtype}) does not cover every frame"
-            return None
-        self.heading_note = f"{topic} ({msgtype})"
+        notes.append(f"{topic} ({msgtype})" if found is not None
+                     else f"{topic} ({msgtype}) does not cover every frame")
         return found
 
     def _index_messages(self) -> None:
