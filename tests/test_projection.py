@@ -220,3 +220,12 @@ def test_a_projection_the_frames_cannot_have_is_refused_in_one_line(files, name,
             list(src.frames(1.0))
     message = str(err.value)
     assert files[name].name in message and "--projection" in message and "\n" not in message
+
+
+def test_the_meta_gives_the_option_back():
+    from engine.sources.projection import projection_option
+
+    p = parse_projection("dual-fisheye:fov=195,roll=0/180")
+    again = parse_projection(projection_option({"projection": p.as_meta()}))
+    assert (again.name, again.layout, again.fov, again.roll) == (p.name, p.layout, p.fov, p.roll)
+    assert projection_option({"projection": {"name": "equirect"}}) is None and projection_option({}) is None

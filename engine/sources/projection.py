@@ -90,11 +90,31 @@ class Projection:
         """Video streams the frames come from."""
         return 2 if self.layout in ("two-streams", "gopro") else 1
 
+    def as_option(self) -> str:
+        """The ``--projection`` text that gives this projection back (``parse_projection``)."""
+        parts = [f"layout={self.layout}"]
+        if self.fov:
+            parts.insert(0, f"fov={self.fov:g}")
+        if any(self.roll):
+            parts.append("roll=" + "/".join(f"{r:g}" for r in self.roll))
+        return f"{self.name}:{','.join(parts)}"
+
     def as_meta(self) -> dict:
         """What the descriptors' meta records."""
         d = asdict(self)
         d["roll"] = list(self.roll)
         return d
+
+
+def projection_option(meta: dict) -> Optional[str]:
+    """The ``--projection`` text of a descriptors' meta (``Projection.as_meta``), to open the
+    recording again as it was described (e.g. a viewer of a bag of fisheyes); None when the
+    frames needed no conversion."""
+    d = (meta or {}).get("projection") or {}
+    if not d or d.get("name", "equirect") == "equirect":
+        return None
+    return Projection(name=d["name"], layout=d.get("layout", ""), fov=float(d.get("fov") or 0.0),
+                      roll=tuple(d.get("roll") or (0.0, 0.0))).as_option()
 
 
 def parse_projection(text: Optional[str]) -> Optional[Projection]:
