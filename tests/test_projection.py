@@ -229,3 +229,20 @@ def test_the_meta_gives_the_option_back():
     again = parse_projection(projection_option({"projection": p.as_meta()}))
     assert (again.name, again.layout, again.fov, again.roll) == (p.name, p.layout, p.fov, p.roll)
     assert projection_option({"projection": {"name": "equirect"}}) is None and projection_option({}) is None
+
+
+def test_panotopo_maps_a_dual_fisheye_bag_with_one_projection_option(tmp_path, capsys):
+    pytest.importorskip("rosbags")
+    import networkx as nx
+
+    from test_sources_data import ros1_image, write_messages_bag
+
+    frames = [clips.dual_fisheye(clips.panorama(3 * k), 190.0, clips.H) for k in range(8)]
+    bag = write_messages_bag(tmp_path / "dfe.bag",
+                             [("/cam", 5.0 + k, ros1_image(f, 5.0 + k)) for k, f in enumerate(frames)])
+    out = tmp_path / "bag.graphml"
+    code, lines = _cli(capsys, "map", bag, "-o", out, "--no-cache", "--input-height", "32", "-q",
+                       "--projection", "dual-fisheye")
+    assert code == 0, lines
+    g = nx.read_graphml(out)
+    assert g.graph["projection"] == "dual-fisheye" and g.number_of_nodes() >= 1
