@@ -42,6 +42,7 @@ import hashlib
 import json
 import logging
 import os
+import sys
 import threading
 import time
 import uuid
@@ -208,6 +209,34 @@ class _EventProgress:
             pass
 
 
+_MALLOC_SET = False
+# glibc mallopt parameters (malloc.h) and the values set on a Dask worker.
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+MMAP_THRESHOLD_BYTES = 32 << 20
+TRIM_THRESHOLD_BYTES = 128 << 20
+
+
+def _malloc_for_arrays() -> None:
+    """Undo, in this worker process, what Dask's nanny's MALLOC_TRIM_THRESHOLD_=65536 does to
+    describing: glibc then keeps its mmap threshold at 128 KiB, so every frame-sized array is a
+    fresh mmap, page-faulted and unmapped again. Measured (2-core machine, 4 recordings of 24
+    frames 512x256, effnet-vlad, one torch thread): 12.3 s wall / 2.8 s system time with it,
+    3.6 s / 0.1 s after mallopt(M_MMAP_THRESHOLD, 32 MiB) + mallopt(M_TRIM_THRESHOLD, 128 MiB),
+    4.0 s / 0.4 s without the variable. Once per process, glibc on Linux only, best effort."""
+    global _MALLOC_SET
+    if _MALLOC_SET or "MALLOC_TRIM_THRESHOLD_" not in os.environ or not sys.platform.startswith("linux"):
+        return
+    _MALLOC_SET = True
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
+        libc.mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES)
+    except (OSError, AttributeError):
+        pass
+
+
 def _current_worker():
     try:
         from distributed import get_worker
@@ -229,6 +258,8 @@ def describe_one(path: str, output: str, settings: dict, topic: Optional[str] = 
 
     worker = _current_worker()
     address = getattr(worker, "address", "") if worker is not None else ""
+    if worker is not None:
+        _malloc_for_arrays()
     if is_descriptor_file(path):
         raise InputError(f"{path}: already a descriptors file (.npz); nothing to describe")
     if not os.path.exists(path):
