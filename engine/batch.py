@@ -437,6 +437,11 @@ def describe_batch(inputs: Sequence[str | Path], out_dir: str | Path, settings,
     called with each outcome as it happens (done, described or failed). Raises InputError only
     for what stops the whole batch (the output folder, the scheduler); a recording's own
     problem is its failed ``Outcome``."""
+    from . import descriptors as registry
+
+    plain = _plain_settings(settings)
+    if plain.get("descriptor") not in registry.REGISTRY:
+        registry.model_class(plain.get("descriptor"))   # InputError: one line naming the choices
     out = Path(_absolute(out_dir))
     if out.exists() and not out.is_dir():
         raise OutputError(f"{out_dir}: --out-dir must be a folder")
@@ -448,7 +453,6 @@ def describe_batch(inputs: Sequence[str | Path], out_dir: str | Path, settings,
     result = BatchResult(duplicates=repeats)
     tell = said or (lambda outcome: None)
     report = progress or (lambda *a: None)
-    plain = _plain_settings(settings)
 
     todo: list[Job] = []
     for job in jobs:

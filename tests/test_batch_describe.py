@@ -224,6 +224,7 @@ def test_output_names(tmp_path):
     ["x.mp4", "-o", "a.npz", "--workers", "2"],
     ["x.mp4", "--out-dir", "d", "--workers", "0"],
     ["x.mp4", "--out-dir", "d", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"],
+    ["x.mp4", "y.mp4", "--out-dir", "d", "--descriptor", "nope"],   # refused before any cluster
 ])
 def test_wrong_forms_get_one_line(args, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
