@@ -43,7 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from engine.benchmark import Row, score_map  # noqa: E402
+from benchmarks.harness import Row, score_map  # noqa: E402
 from engine.descriptors.base import Descriptors  # noqa: E402
 from engine.descriptors.efficientnet import PHOTOMETRIC as PHOTOMETRIC_CHOICES  # noqa: E402
 from engine.frames import Frame  # noqa: E402
@@ -216,7 +216,7 @@ def run(family: str, seeds, methods, cache: Path, params: dict) -> list[Row]:
 
 
 def table(rows: list[Row], methods) -> str:
-    from engine.benchmark import sum_rows
+    from benchmarks.harness import sum_rows
 
     lines = ["| family | route | method | runs | false loops | events found | with candidates | "
              "candidates (false) | precision | recall |", "|---|---|---|---|---|---|---|---|---|---|"]
@@ -327,7 +327,7 @@ def main() -> None:
 
 def record(rows: list[Row], methods, family: str, seeds, groups, params: dict, note: str = "") -> None:
     """One row per method (its totals over every recording) appended to runs.csv."""
-    from engine.benchmark import sum_rows
+    from benchmarks.harness import sum_rows
     from runs import RUNS, append_run
 
     for m in methods:

@@ -31,7 +31,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from engine.benchmark import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
+from benchmarks.harness import (PAPER_METHODS, Case, Row, calibrated_params, describe_case, evaluate_methods,
                               markdown_table, sum_rows, summary_table)
 from engine.params import MapParams
 from engine.synth import ROUTES

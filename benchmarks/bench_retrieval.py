@@ -5,9 +5,9 @@ Run one size per process (peak RSS is per process), with two threads:
     OMP_NUM_THREADS=2 OPENBLAS_NUM_THREADS=2 PYTHONPATH=$PWD \\
         python benchmarks/bench_retrieval.py --n 100000 --method approximate
 
-Data: ``engine.benchmark.random_walk_descriptors(n, 1024, seed)`` (a smooth walk on the
+Data: ``benchmarks.harness.random_walk_descriptors(n, 1024, seed)`` (a smooth walk on the
 sphere with forward and reverse revisits), or ``--synthetic`` for the descriptors of a
-rendered synthetic recording (``engine.benchmark.describe_case``; small n, for recall on
+rendered synthetic recording (``benchmarks.harness.describe_case``; small n, for recall on
 real descriptor statistics). Times: ``nearest`` (k=10, exclude=5) and ``background``.
 Recall@k of the approximate path is measured against exact search for a random sample of
 query rows (exact for a few thousand rows costs rows * n * d, cheap at any n).
@@ -37,7 +37,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from engine import retrieval  # noqa: E402
-from engine.benchmark import random_walk_descriptors  # noqa: E402
+from benchmarks.harness import random_walk_descriptors  # noqa: E402
 
 
 def _cpu() -> float:
@@ -70,7 +70,7 @@ def revisits_found(neigh, origin: np.ndarray, tolerance: int = 2) -> float:
 
 
 def synthetic_vectors() -> np.ndarray:
-    from engine.benchmark import Case, describe_case
+    from benchmarks.harness import Case, describe_case
 
     d = describe_case(Case("figure8", "city", seed=0), shifts=(True,))
     return d.by_shift[True].vectors

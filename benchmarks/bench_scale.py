@@ -4,7 +4,7 @@ re-mapping 5,000 nodes after a threshold change (issue 13, item 6).
     python benchmarks/bench_scale.py [--nodes 100000] [--dim 1024] [--remap-nodes 5000]
 
 The descriptors are a random walk on the sphere with revisits
-(``engine.benchmark.random_walk_descriptors``), saved as a ``.npz`` whose ``meta`` names a
+(``benchmarks.harness.random_walk_descriptors``), saved as a ``.npz`` whose ``meta`` names a
 descriptor panotopo does not know ("my-own-vpr"), with no column signatures and no local
 features: thresholds come from the recording. ``panotopo map`` runs as a child process with
 two BLAS threads; wall time and the child's peak resident memory are reported.
@@ -26,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from engine.benchmark import random_walk_descriptors  # noqa: E402
+from benchmarks.harness import random_walk_descriptors  # noqa: E402
 from engine.descriptors.base import Descriptors  # noqa: E402
 from engine.params import MapParams  # noqa: E402
 from engine.pipeline import build_map  # noqa: E402

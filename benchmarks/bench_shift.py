@@ -9,7 +9,7 @@
 route, the share whose canonical headings (``engine.shift.canonical_shift``) agree with
 the true relative yaw within 20 degrees. ``methods``: simple, shift-simple and ours on
 crossing and reverse routes at the same calibrated threshold (the harness of
-``engine.benchmark``), with the ``effnet-vlad`` layout given. ``verified``: the
+``benchmarks.harness``), with the ``effnet-vlad`` layout given. ``verified``: the
 ``verified`` method (and ``ours``) on held-out seeds with that layout.
 ``stability``: the image-only shift against two ways of tying it to the previous frame
 (tracking by ``relative_yaw``) and against the shift from the recorded heading, on the
@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout
 
-from engine.benchmark import (FPS, PAPER_METHODS, Case, Described, calibrated_params,  # noqa: E402
+from benchmarks.harness import (FPS, PAPER_METHODS, Case, Described, calibrated_params,  # noqa: E402
                               evaluate_methods, summary_table)
 from engine.descriptors.base import Descriptors  # noqa: E402
 from engine.frames import Frame  # noqa: E402

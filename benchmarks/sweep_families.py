@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_families as bf  # noqa: E402
-from engine.benchmark import score_map, sum_rows  # noqa: E402
+from benchmarks.harness import score_map, sum_rows  # noqa: E402
 from engine.params import BY_NAME, MapParams  # noqa: E402
 from engine.run import run as run_map  # noqa: E402
 

@@ -470,9 +470,6 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     _add_table_parameters(p)
     p.add_argument("--keep-candidates", action="store_true",
                    help="verified: also write the loop candidates waiting for review (status 'candidate')")
-    p.add_argument("--no-long-runs", dest="long_runs", action="store_false",
-                   help="verified-rules: skip the long-run step that finds returns with a lateral offset "
-                        "(fewer loops found, fewer false ones)")
     p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
                                     "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")

@@ -158,17 +158,3 @@ class IndexedSource(FrameSource):
 
     def stamps(self) -> np.ndarray:
         return self._stamps.copy()
-
-
-def open_source(path: str | Path, topic: Optional[str] = None, interval: float = 1.0,
-                projection: Optional[str] = None, keyframes_only: bool = False,
-                skip_bad_frames: bool = False) -> FrameSource:
-    """Open any supported recording; raises InputError with a clear reason.
-
-    ``interval`` spaces the stamps of an image folder that has no stamps.csv; ``projection``,
-    ``keyframes_only`` and ``skip_bad_frames``: see ``engine.sources.open_recording``.
-    """
-    from .sources import open_recording  # sources import this module
-
-    return open_recording(Path(path), topic=topic, interval=interval, projection=projection,
-                          keyframes_only=keyframes_only, skip_bad_frames=skip_bad_frames)

@@ -53,16 +53,16 @@ TIERS = ("auto", "candidate")   # what detection says of a loop before a person 
 
 # Attributes whose type is fixed by the contract; values are cast on the way in and out.
 _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label": str,
-               "x": float, "y": float}
+               "x": float, "y": float, "heading": float}
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
                "path_inliers": int, "confidence": float, "closure": float, "step_inliers": int,
-               "plane_share": float, "distance_steps": float}
+               "plane_share": float, "distance_steps": float, "rule": str, "reason": str}
 EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
-                 "step_inliers", "confidence", "closure", "plane_share", "distance_steps")
+                 "step_inliers", "confidence", "closure", "plane_share", "distance_steps", "rule", "reason")
 # Graph attributes: every map parameter with its declared type (bools stored as 0/1).
-_GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float,
+_GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float, "positions": str,
                 **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}
 
 
@@ -121,7 +121,7 @@ class TopoMap:
             if lc.yaw is not None:
                 attrs["yaw"] = float(lc.yaw)
             for k, v in (lc.evidence or {}).items():
-                if k in EVIDENCE_KEYS and v is not None and np.isfinite(v):
+                if k in EVIDENCE_KEYS and v is not None and (isinstance(v, str) or np.isfinite(v)):
                     attrs[k] = _EDGE_TYPES[k](v)
             g.add_edge(f"n{lc.a}", f"n{lc.b}", **attrs)
 
@@ -160,8 +160,11 @@ class TopoMap:
     def stamps(self) -> np.ndarray:
         return self._node_array("stamp", np.float64)
 
-    def positions(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
-        """Node (x, y) when every node has one, else None."""
+    def positions(self, estimated: bool = False) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """Node (x, y) when every node has one, else None; positions the pose graph estimated
+        (graph ``positions`` "estimated") only when ``estimated`` (they are no ground truth)."""
+        if self.graph.graph.get("positions") == "estimated" and not estimated:
+            return None
         nodes = self._ordered()
         if not nodes or not all("x" in self.graph.nodes[n] and "y" in self.graph.nodes[n] for n in nodes):
             return None
@@ -233,7 +236,10 @@ class TopoMap:
         self._check_node(node)
         self.graph.nodes[node]["label"] = str(label)
 
-    def set_positions(self, x: np.ndarray, y: np.ndarray) -> None:
+    def set_positions(self, x: np.ndarray, y: np.ndarray, heading: Optional[np.ndarray] = None,
+                      kind: str = "ground truth") -> None:
+        """Node positions (and headings, degrees) with where they came from (graph attribute
+        ``positions``: "ground truth", "gps" or "estimated", the pose graph's)."""
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         if x.shape != (self.node_count,) or y.shape != (self.node_count,):
@@ -243,6 +249,11 @@ class TopoMap:
         for n, xi, yi in zip(self._ordered(), x, y):
             self.graph.nodes[n]["x"] = float(xi)
             self.graph.nodes[n]["y"] = float(yi)
+            self.graph.nodes[n].pop("heading", None)
+        if heading is not None:
+            for n, hi in zip(self._ordered(), np.asarray(heading, np.float64)):
+                self.graph.nodes[n]["heading"] = float(hi)
+        self.graph.graph["positions"] = str(kind)
 
     # ----- decisions (curation keyed by source frames) --------------------------------
     def decisions(self) -> dict:

@@ -9,23 +9,24 @@ the app shows it, and every value used is written into the GraphML ``graph`` att
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, make_dataclass, replace
 from typing import Optional
 
 from .limits import MAX_COSINE, MAX_NODE_COUNT_PARAM, MIN_COSINE
 
-METHODS = ("simple", "shift-simple", "ours", "verified", "verified-rules")
+METHODS = ("simple", "shift-simple", "ours", "verified")
 # Methods whose descriptors are computed on panorama-shifted frames.
-SHIFTED_METHODS = ("shift-simple", "ours", "verified", "verified-rules")
+SHIFTED_METHODS = ("shift-simple", "ours", "verified")
 METHOD_DESCRIPTIONS = {
     "simple": "Simple threshold: any pair with similarity >= loop_sim_th (no panorama shift)",
     "shift-simple": "Panorama shift + simple threshold",
     "ours": "Panorama shift + spatial consistency check (the paper's method)",
     "verified": "Retrieval + calibrated scores + support along the stretch + two-view geometry "
-                "on the sphere + heading consistency; auto loops and candidates for review",
-    "verified-rules": "The first round's verified method (rules tuned on one synthetic world; "
-                      "kept for comparison)",
+                "on the sphere + a robust pose graph; auto loops and candidates for review",
 }
+# Methods this project no longer ships: a session or .npz naming one opens with the method that
+# replaced it and one line saying so (the old code is kept by the git tag ``verified-rules``).
+RETIRED_METHODS = {"verified-rules": "verified"}
 PAPER_METHODS = ("simple", "shift-simple", "ours")
 # Describe options a method asks of its descriptor, as SHIFTED_METHODS ask for the panorama
 # shift (``engine.pipeline.method_settings`` fills them in). Applied only to a descriptor that
@@ -71,8 +72,6 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("neighbor_node_num", int, 5, _ALL,
               "temporal neighbours: nodes this close along the path are never a loop",
               "paper section 4", 0, MAX_NODE_COUNT_PARAM),
-    Parameter("long_runs", bool, True, ("verified-rules",),
-              "verified-rules step 5: returns with a lateral offset", "first round"),
     Parameter("retrieval_k", int, 10, _NEW,
               "best descriptor matches kept per node as loop candidates",
               "the probe of issue 13: true pairs sat among each node's 10 best matches", 1, 200),
@@ -139,18 +138,14 @@ PARAMETERS: tuple[Parameter, ...] = (
               "one loop per place: a loop must be the most confident within this many nodes "
               "on both ends (stage 7b may move it by up to half as many to the pair that "
               "measures closest)", "node spacing about 1 m: 4 nodes keep one loop per few metres", 0, 1000),
-    Parameter("heading_tol", float, 35.0, _NEW,
-              "degrees a cycle of path and two loops may miss closing (plus drift along the path)",
-              "chosen on the first synthetic family", 0.0, 180.0),
     Parameter("closure_slack", float, 2.0, _NEW,
-              "node steps the dead-reckoned path between a loop's ends may miss meeting, plus "
-              "closure_rate per step along it (beyond: an automatic loop goes back to the "
-              "queue, a candidate is dropped)",
+              "node steps a candidate's ends may lie apart in the solved pose graph, plus "
+              "closure_rate per step of the graph between them (beyond: the candidate is dropped)",
               "chosen on the first synthetic family (seeds 0-4): the two visits of a place "
               "on a short return miss by 2 steps at most", 0.0, 1e6),
     Parameter("closure_rate", float, 0.2, _NEW,
-              "share of the path length between a loop's ends that dead reckoning "
-              "may miss meeting (heading and step-length drift)",
+              "share of the graph's steps between a candidate's ends that the solved map may "
+              "put them apart (heading and step-length drift)",
               "chosen on the first synthetic family (seeds 0-4), the least round number above "
               "the worst true automatic loop. Seventeenth round, with the direction of each "
               "step's motion chosen by points with parallax (engine.sphere._decompose): at most "
@@ -161,37 +156,43 @@ PARAMETERS: tuple[Parameter, ...] = (
               "benchmarks/results/closure_rate_seventeenth.md). Eighteenth round, steps "
               "without parallax counting no distance: at most 0.175, still 0.2 "
               "(benchmarks/results/families_eighteenth.md)", 0.0, 10.0),
+    Parameter("geometry_margin_z", float, 1.0, _NEW,
+              "geometry is measured on pairs this far below candidate_z (a crossing's single "
+              "pair can score modestly and fit strongly); also the lowest score an automatic "
+              "loop needs where geometry says one place twice over", "chosen on the first synthetic family", 0.0, 100.0),
+    Parameter("inliers_per_z", float, 20.0, _NEW,
+              "two-view inliers beyond the path's own worth one standard deviation of score in "
+              "a pair's confidence", "unrelated views keep about 20 inliers at most (99th "
+              "percentile 22 in the probe of issue 13)", 1.0, 1e6),
+    Parameter("still_parallax_deg", float, 2.5, _NEW,
+              "a step whose views show less parallax is a turn on the spot (no distance)",
+              "first synthetic family: steps on the spot 0.3-1.5 degrees, moving steps 4 or more", 0.0, 90.0),
+    Parameter("ambiguous_turn_deg", float, 90.0, _NEW,
+              "a step turning more than this is ambiguous (a scene alike both ways reads a straight "
+              "step as a half turn): the loops may outvote it in the pose graph",
+              "a quarter turn: a half turn misread is 180 degrees off, a true turn at one node step rare", 0.0, 180.0),
+    Parameter("step_sigma_steps", float, 0.3, _NEW,
+              "uncertainty of a step's position in the pose graph, node steps (step lengths vary)",
+              "chosen on the first synthetic family (docs/method.md)", 1e-3, 100.0),
+    Parameter("step_turn_sigma_deg", float, 2.0, _NEW,
+              "uncertainty of a step's turn in the pose graph, degrees",
+              "chosen on the first synthetic family (docs/method.md)", 1e-3, 180.0),
+    Parameter("loop_sigma_steps", float, 0.5, _NEW,
+              "how far apart a loop's two views may be in the pose graph, node steps",
+              "an automatic loop's views are at most auto_distance_steps apart; half of that is "
+              "one standard deviation", 1e-3, 100.0),
+    Parameter("loop_turn_sigma_deg", float, 10.0, _NEW,
+              "uncertainty of a loop's relative heading in the pose graph, degrees",
+              "chosen on the first synthetic family (docs/method.md)", 1e-3, 180.0),
+    Parameter("graph_inlier_probability", float, 0.99, _NEW,
+              "a loop the robust pose graph keeps fits at this chi-square probability",
+              "the usual 99 % of robust back ends (Kimera-RPGO, GTSAM's GNC default)", 0.5, 0.999999),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 
 
-@dataclass(frozen=True)
-class MapParams:
-    """One value per entry of ``PARAMETERS`` (same names, same defaults; a test checks)."""
-
-    method: str = "verified"
-    node_sim_th: Optional[float] = None
-    loop_sim_th: Optional[float] = None
-    window_size: int = 5
-    count_th: int = 2
-    neighbor_node_num: int = 5
-    long_runs: bool = True
-    retrieval_k: int = 10
-    candidate_z: float = 3.0
-    candidate_confidence: float = 6.0
-    support_half: int = 3
-    auto_z: float = 5.0
-    auto_support: float = 3.0
-    auto_inliers: int = 40
-    auto_geometry_z: float = 3.5
-    auto_step_share: float = 1.0
-    auto_distance_steps: float = 1.1
-    auto_measured_share: float = 0.6
-    auto_plane_share: float = 0.6
-    place_radius: int = 4
-    heading_tol: float = 35.0
-    closure_slack: float = 2.0
-    closure_rate: float = 0.2
+class _MapParamsMethods:
+    """What every ``MapParams`` can do; its fields come from ``PARAMETERS`` (declared once)."""
 
     def resolved(self, defaults: dict) -> "MapParams":
         """Fill every None from a descriptor's ``defaults``."""
@@ -235,6 +236,13 @@ class MapParams:
             elif (p.minimum is not None and v < p.minimum) or (p.maximum is not None and v > p.maximum):
                 out.append((p.name, f"must lie in [{p.minimum:g}, {p.maximum:g}], got {v:g}"))
         return out
+
+
+MapParams = make_dataclass(
+    "MapParams", [(p.name, Optional[p.type], field(default=p.default)) for p in PARAMETERS],
+    bases=(_MapParamsMethods,), frozen=True)
+MapParams.__module__ = __name__
+MapParams.__doc__ = "One value per entry of ``PARAMETERS`` (same names, same defaults, generated from it)."
 
 
 def parameters_for(method: str) -> list[Parameter]:

@@ -16,7 +16,8 @@ import numpy as np
 from . import descriptors as descriptor_registry
 from .descriptors.base import Descriptors
 from .errors import InputError
-from .frames import Frame, FrameSource, open_source
+from .frames import Frame, FrameSource
+from .sources import open_source
 from .params import MapParams
 from .progress import CancelToken, Progress, check
 

@@ -206,11 +206,18 @@ def check_params(value: Any) -> dict:
 
     from .params import MapParams
 
+    from .params import RETIRED_METHODS
+
     p = _mapping(value, "params")
     known = {f.name for f in fields(MapParams)}
-    out = {k: v for k, v in p.items() if k in known}
-    if "long_runs" in out and not isinstance(out["long_runs"], bool):
-        raise _fail("params.long_runs", "true or false", out["long_runs"])
+    out = {k: v for k, v in p.items() if k in known}   # a retired method's own parameters are left out
+    if isinstance(out.get("method"), str) and out["method"] in RETIRED_METHODS:
+        import warnings
+
+        new = RETIRED_METHODS[out["method"]]
+        warnings.warn(f"this session names the method '{out['method']}', which panotopo no longer ships; "
+                      f"it opens with '{new}', which replaced it")
+        out["method"] = new
     if "method" in out and not isinstance(out["method"], str):
         raise _fail("params.method", "a method name", out["method"])
     for key in ("window_size", "count_th", "neighbor_node_num"):

@@ -432,7 +432,7 @@ def planar_yaw(tv: TwoView) -> tuple[float, int]:
 
     RANSAC of a general essential model draws samples of eight matches, and where a third of
     the matches or fewer are right it finds the best model by luck, or a model of a scene that
-    looks alike turned round (``engine.loop_closure._turns_read``). A camera on a robot stays
+    looks alike turned round (``engine.loops.geometry.PairGeometry.steps``). A camera on a robot stays
     about upright, so the motion between two nearby views has two degrees of freedom, few
     enough to try every turn and every direction at ``PLANAR_STEP_DEG``: no sampling at all.
     A match agrees when the sine of its distance to the epipolar great circle is within the
@@ -602,7 +602,7 @@ def parallax(tv: TwoView) -> float:
     hardly at all, so the upper tail says whether the camera moved, and the median (often
     the far scenery outdoors) cannot. The essential model's one-dimensional test leaves
     noise along the epipolar circle in its inliers, so a camera that did not move still
-    shows a degree or two (``engine.loop_closure.STILL_PARALLAX_DEG``)."""
+    shows a degree or two (``MapParams.still_parallax_deg``)."""
     if tv.model == "none":
         return float("nan")
     m = tv.inlier_mask

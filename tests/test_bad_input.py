@@ -191,12 +191,6 @@ def test_map(data, args, word):
                     if "--method" not in args else run(data, "map", *args, "-o", "out.graphml", "-q"), word)
 
 
-def test_map_too_big_for_verified_is_refused_before_allocating(data):
-    """Finding 14: 50k nodes under the first-round verified (now verified-rules) segfaulted, 200k asked for 149 GiB."""
-    assert_one_line(run(data, "map", "big.npz", "-o", "out.graphml", "--method", "verified-rules", "-q",
-                        limit_memory=True), "--method ours")
-
-
 DESCRIBE = [
     (["v.avi", "--interval", "nan"], "--interval"),
     (["v.avi", "--device", "bogus"], "--device"),

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from engine.benchmark import random_walk_descriptors
+from benchmarks.harness import random_walk_descriptors
 from engine.cli import main
 from engine.descriptors.base import Descriptors
 from engine.params import MapParams

@@ -9,7 +9,7 @@ pytest.importorskip("pytestqt")
 
 from PySide6.QtCore import QPointF, Qt  # noqa: E402
 
-from engine.frames import open_source  # noqa: E402
+from engine.sources import open_source  # noqa: E402
 from gui.frame_cache import FrameCache  # noqa: E402
 from gui.pair_evidence import PairMatches  # noqa: E402
 from gui.pair_view import PairView  # noqa: E402
@@ -173,18 +173,15 @@ def test_matches_from_the_runs_feature_table(pair, qtbot):
 
 
 def test_matches_that_finish_before_their_callback_is_registered_are_shown(pair, qtbot):
-    """On a loaded machine the worker can finish a pair before the UI thread registers the
-    done callback, which then runs at once inside the request: the matches must still show."""
-    from concurrent.futures import Future
-
+    """On a loaded machine the worker can finish a pair before the UI thread goes on, its
+    done callback running at once inside the request: the matches must still show."""
     view, _, _ = pair
 
-    def run_now(fn, *args):           # the worker at its fastest: done before submit returns
-        future = Future()
-        future.set_result(fn(*args))
-        return future
+    def run_now(fn, done=None, failed=None, **_kw):   # the worker at its fastest: done before submit returns
+        done(fn())
+        return 0
 
-    view._pool.submit = run_now
+    view.match_worker.submit = run_now
     view.show_pair((0, 15))
     qtbot.waitUntil(lambda: view.matches is not None or bool(view.match_cache.errors), timeout=10_000)
     assert view.matches is not None, view.match_cache.errors

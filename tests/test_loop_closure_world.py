@@ -2,14 +2,14 @@
 
 Each node sees the points within a few metres as local features (exact projections on the
 sphere, one distinct descriptor per point), so two-view fits, the measured distance between
-two visits (``distance_steps``) and the move of stage 7b run on real arithmetic with a known
+two visits (``distance_steps``), the move of stage 6 and the pose graph of stage 7 run on real arithmetic with a known
 answer: where the paths are.
 """
 
 import numpy as np
 
 from engine.features import FeatureTable, LocalFeatures
-from engine.loop_closure import detect_loops
+from engine.loops.verified import detect_loops as _detect
 from engine.params import MapParams
 from engine.sphere import to_uv
 
@@ -31,6 +31,10 @@ def _path():
     west = [(19.2 - STEP * k, 9.6) for k in range(1, 12)]             # to x = 10.4
     south = [(9.9, 9.6 - STEP * k) for k in range(1, 25)]             # crosses y = 0 at k = 12
     return np.array(east + north + west + south)
+
+
+def detect_loops(*args, **kwargs):
+    return _detect(*args, **kwargs).loops
 
 
 def _features(path, points, desc) -> FeatureTable:
@@ -91,7 +95,7 @@ def test_the_same_scene_one_and_a_half_steps_away_is_not_made_one_place():
 
 def test_a_crossing_kept_two_nodes_off_moves_to_where_the_two_paths_touch():
     # The descriptor prefers node 15 of the first leg (x = 12.0, 2.1 m away); nodes 13 and 12,
-    # two and three nodes back, are 0.5 and 0.3 m away: stage 7b's reach (half of stage 4's
+    # two and three nodes back, are 0.5 and 0.3 m away: stage 6's reach (half of stage 3's
     # radius) takes the match to them, and nothing further apart is automatic.
     points, desc = _world()
     path = _path()
@@ -106,7 +110,7 @@ def test_a_crossing_kept_two_nodes_off_moves_to_where_the_two_paths_touch():
 
 def test_a_crossing_kept_four_nodes_off_closes_where_the_paths_touch_through_the_pairs_set_aside():
     # The descriptor prefers node 16 of the first leg (x = 12.8, 2.9 m away), beyond stage
-    # 7b's two nodes beside it, and finds node 13 (0.5 m away) alike too, but less: stage 4
+    # 6's two nodes beside it, and finds node 13 (0.5 m away) alike too, but less: stage 3
     # keeps the first and sets the other aside for it. The pairs set aside are the place's
     # other pairs; the closest one closes it, and the place gets one automatic loop.
     points, desc = _world()
@@ -120,3 +124,22 @@ def test_a_crossing_kept_four_nodes_off_closes_where_the_paths_touch_through_the
     auto = [lc for lc in loops if lc.status == "auto"]
     assert [crossing in (lc.a, lc.b) for lc in auto] == [True], [(lc.a, lc.b, lc.status) for lc in loops]
     assert np.linalg.norm(path[auto[0].a] - path[auto[0].b]) <= 1.0
+
+
+def test_the_pose_graph_draws_the_driven_path_without_ground_truth():
+    # Stage 7's solved poses are the path as driven, up to a rotation and a scale: the
+    # crossing's two visits meet, and the legs keep their shape.
+    points, desc = _world()
+    path = _path()
+    crossing = 25 + 12 + 11 + 12 - 1
+    v = _descriptors(path, crossing, look_alike=12)
+    result = _detect(v, MapParams(), node_rows=np.arange(len(path)), features=_features(path, points, desc))
+    assert result.poses is not None and result.poses.shape == (len(path), 3)
+    est = result.poses[:, :2] - result.poses[0, :2]
+    true = path - path[0]
+    # best rotation and scale (Procrustes), then every node within two node steps of the truth
+    u, s, vt = np.linalg.svd(est.T @ true)
+    rot = u @ vt
+    scale = s.sum() / (est ** 2).sum()
+    fitted = scale * est @ rot
+    assert np.max(np.linalg.norm(fitted - true, axis=1)) < 2 * STEP

@@ -147,7 +147,7 @@ def test_bad_parameters_and_tiny_inputs():
     assert detect_loops(v, params(w=5)) == []  # fewer nodes than one window
     assert detect_loops(np.zeros((0, 3), np.float32), params()) == []
     with pytest.raises(InputError, match="loop_sim_th"):
-        detect_loops(v, MapParams(loop_sim_th=None))
+        detect_loops(v, MapParams(method="ours", loop_sim_th=None))
     with pytest.raises(InputError, match="method"):
         detect_loops(v, params(method="magic"))
     with pytest.raises(InputError):

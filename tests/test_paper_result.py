@@ -23,7 +23,7 @@ about the same with either layout (1 false loop; 16/20 and 15/20 events).
 import numpy as np
 import pytest
 
-from engine.benchmark import FPS, PAPER_METHODS, Case, Described, calibrated_params, evaluate_methods, sum_rows
+from benchmarks.harness import FPS, PAPER_METHODS, Case, Described, calibrated_params, evaluate_methods, sum_rows
 from engine.frames import Frame
 from engine.pipeline import DescribeSettings, describe_frames
 from engine.synth import make_recording

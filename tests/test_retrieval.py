@@ -31,7 +31,7 @@ def _brute(v: np.ndarray, k: int, exclude: int):
 def _walk_with_revisits(n: int = 3000, d: int = 64, seed: int = 0):
     """A smooth walk; rows [2000, 2200) revisit rows [300, 500) forward and rows
     [2400, 2600) revisit rows [1000, 1200) in reverse, as noisy copies (cos ~0.9)."""
-    from engine.benchmark import random_walk_descriptors
+    from benchmarks.harness import random_walk_descriptors
 
     rng = np.random.default_rng(seed)
     x = random_walk_descriptors(n, d, seed, revisit_share=0.0)[0]

@@ -37,7 +37,6 @@ BAD_FIELDS = [
     ({"params": {"loop_sim_th": 7}}, "params.loop_sim_th"),
     ({"params": {"node_sim_th": "high"}}, "params.node_sim_th"),
     ({"params": {"method": "magic"}}, "params.method"),
-    ({"params": {"long_runs": "no"}}, "params.long_runs"),
     ({"view": {"frame": "twelve"}}, "view.frame"),
     ({"view": {"selected": [1]}}, "view.selected"),
     ({"poses": {"path": 3}}, "poses"),
@@ -123,3 +122,15 @@ def test_an_unknown_descriptor_in_a_file_is_named(tmp_path):
     path = _write(tmp_path, describe={"descriptor": "fetch-from-the-web", "options": {"input_height": 64}})
     with pytest.raises(InputError, match="describe.descriptor"):
         Session.load(path)
+
+
+def test_a_session_of_the_retired_method_opens_with_the_one_that_replaced_it():
+    import warnings
+
+    from engine.session_fields import check_params
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out = check_params({"method": "verified-rules", "long_runs": True, "retrieval_k": 12})
+    assert out["method"] == "verified" and "long_runs" not in out and out["retrieval_k"] == 12
+    assert len(caught) == 1 and "verified-rules" in str(caught[0].message)

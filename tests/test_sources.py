@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 import pytest
 
-from engine.frames import open_source, sample_indices
+from engine.frames import sample_indices
+from engine.sources import open_source
 from engine.poses import Poses
 from engine.sources import (
     BagSource,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.errors import InputError
-from engine.frames import open_source
+from engine.sources import open_source
 from engine.poses import Poses
 from engine.sources import (
     BagSource,

@@ -6,7 +6,7 @@ import pytest
 
 from engine.features import FeatureTable, LocalFeatures, extract
 from engine.shift import apply_shift, canonical_shift, relative_yaw
-from engine.loop_closure import STILL_PARALLAX_DEG
+from engine.params import MapParams
 from tests.sphere_views import fitted
 from engine.sphere import (COMMON_POINTS_MIN, MODEL_CODES, TwoView, _decompose, baseline_ratio, bearings, motion_azimuth,
                            parallax, plane_share, to_uv,
@@ -229,17 +229,18 @@ def test_planar_motion_is_read_from_every_turn_and_direction_even_when_few_match
 
 
 def test_a_straight_step_read_as_a_half_turn_counts_as_straight_and_a_real_turn_stays():
-    from engine.loop_closure import path_headings
+    from engine.loops.geometry import PairGeometry
 
     straight, _ = _planar_step(0.0, np.array([0.8, 0.0, 0.0]), right=0.3, seed=1)
     turn, r = _planar_step(170.0, np.array([0.1, 0.0, 0.0]), right=0.3, seed=2)
-    # What the general model read (matches, inliers, ratio, yaw, motion, plane share), cached
-    # as the map's stage 5 caches it: the straight step as a half turn.
-    cache = {"geometry": {(0, 1): (300, 40, 0.13, 179.0, 0.0, 0.3), (1, 2): (300, 80, 0.27, 170.0, 0.0, 0.3)},
+    # What the general model read (matches, inliers, ratio, yaw, motion, plane share, parallax),
+    # cached as the map's stage 4 caches it: the straight step as a half turn.
+    cache = {"geometry": {(0, 1): (300, 40, 0.13, 179.0, 0.0, 0.3, 5.0), (1, 2): (300, 80, 0.27, 170.0, 0.0, 0.3, 5.0)},
              "two_view": {(0, 1): straight, (1, 2): turn}}
-    headings = path_headings(object(), None, np.arange(3), np.zeros(3, np.int64), 256, cache)
-    assert abs(_wrap(headings[1] - headings[0])) <= 2.0
-    assert abs(_wrap(headings[2] - headings[1] - 170.0)) <= 2.0
+    steps = PairGeometry(object(), np.arange(3), np.zeros(3, np.int64), 256, cache=cache).steps(MapParams())
+    assert abs(_wrap(steps.yaw[0])) <= 2.0 and not steps.ambiguous[0]
+    # the real turn stays, and the pose graph may let loops outvote it (a half turn is ambiguous)
+    assert abs(_wrap(steps.yaw[1] - 170.0)) <= 2.0 and steps.ambiguous[1]
 
 
 @pytest.mark.parametrize("rotation_error_deg", [0.5, -0.5])
@@ -282,4 +283,4 @@ def test_a_camera_that_turned_where_it_stood_shows_no_parallax_and_one_that_step
     stood = two_view(here, seen(room @ turn.T))
     stepped = two_view(here, seen((room - np.array([0.8, 0.1, 0.0])) @ turn.T))
     assert stood.model != "none" and stepped.model == "essential"
-    assert parallax(stood) < STILL_PARALLAX_DEG < parallax(stepped)
+    assert parallax(stood) < MapParams().still_parallax_deg < parallax(stepped)

@@ -30,7 +30,7 @@ from .folder import FolderSource, folder_layout
 from .poses import read_poses
 from .rosbag import BagSource, is_ros2_bag_dir, list_image_topics, list_pose_topics
 from .projected import ProjectedSource
-from .projection import detect_projection, parse_projection
+from .projection import detect_projection, looks_like_dual_fisheye, parse_projection
 from .video import VIDEO_SUFFIXES, VideoSource
 from .video_360 import Video360Source
 
@@ -78,12 +78,13 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
         if found.converts:
             return Video360Source(path, found, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
         try:
-            return VideoSource(path, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
+            video = VideoSource(path, keyframes_only=keyframes_only, allow_truncated=skip_bad_frames)
         except InputError as err:
             if "not an equirectangular" not in str(err):
                 raise
             raise InputError(f"{err}; if it is a 360 camera's own layout, name it with --projection "
                              f"(dual-fisheye or eac)") from None
+        return _not_fisheyes(video, path, given)
     if is_bag:
         source: FrameSource = BagSource(path, topic)
     elif path.is_dir():
@@ -98,6 +99,24 @@ def open_recording(path: Path, topic: Optional[str] = None, interval: float = 1.
         except InputError:
             source.close()
             raise
+    return _not_fisheyes(source, path, given)
+
+
+def _not_fisheyes(source: FrameSource, path: Path, given) -> FrameSource:
+    """``source``, unless nothing said what its frames are and the first one is two fisheye
+    images side by side (``projection.looks_like_dual_fisheye``): mapped as a panorama it would
+    be a wrong picture, so it is refused with the option that says what it is."""
+    if given is not None:
+        return source
+    try:
+        first = source.frame_at(0).rgb if source.frame_count else None
+    except (InputError, IndexError):
+        return source   # the reader reports its own damage when the frame is read for real
+    if first is not None and looks_like_dual_fisheye(first):
+        source.close()
+        raise InputError(f"{path}: its frames look like two fisheye images side by side (black corners "
+                         f"around two image circles), not an equirectangular panorama; say which with "
+                         f"--projection dual-fisheye (or --projection equirect)")
     return source
 
 
@@ -130,3 +149,15 @@ def recording_headings(path: Path, stamps) -> Optional["np.ndarray"]:
 
     telemetry = gpmf.read_telemetry(path)
     return None if telemetry is None else gpmf.headings_at(telemetry, stamps)
+
+
+def open_source(path: str | Path, topic: Optional[str] = None, interval: float = 1.0,
+                projection: Optional[str] = None, keyframes_only: bool = False,
+                skip_bad_frames: bool = False) -> FrameSource:
+    """Open any supported recording; raises InputError with a clear reason.
+
+    ``interval`` spaces the stamps of an image folder that has no stamps.csv; ``projection``,
+    ``keyframes_only`` and ``skip_bad_frames``: see ``engine.sources.open_recording``.
+    """
+    return open_recording(Path(path), topic=topic, interval=interval, projection=projection,
+                          keyframes_only=keyframes_only, skip_bad_frames=skip_bad_frames)

@@ -18,15 +18,15 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from .descriptors.base import Descriptors
-from .evaluate import evaluate
-from .frames import Frame
-from .params import METHODS, MapParams
-from .pipeline import DescribeSettings, describe_frames, method_settings
-from .run import run
-from .poses import Poses
-from .synth import make_recording
-from .synth.routes import make_route
+from engine.descriptors.base import Descriptors
+from engine.evaluate import evaluate
+from engine.frames import Frame
+from engine.params import METHODS, MapParams
+from engine.pipeline import DescribeSettings, describe_frames, method_settings
+from engine.run import run
+from engine.poses import Poses
+from engine.synth import make_recording
+from engine.synth.routes import make_route
 
 # Recordings are rendered at one frame per second, so sampling every 1.0 s keeps them all.
 FPS = 1.0
@@ -187,7 +187,7 @@ PAPER_METHODS = ("simple", "shift-simple", "ours")
 def calibrated_params(described: Described, methods: Iterable[str] = METHODS) -> dict:
     """MapParams per method: the paper's three share thresholds calibrated from the
     recording's shifted descriptors (``calibrate.paper_thresholds``); others use their defaults."""
-    from .calibrate import paper_thresholds
+    from engine.calibrate import paper_thresholds
 
     th = paper_thresholds(described.by_shift[True].vectors)
     return {m: (MapParams(**th) if m in PAPER_METHODS else MapParams()) for m in methods}

@@ -1,0 +1,45 @@
+"""Stage 3 of ``verified``: one pair per place (non-maximum suppression in the (a, b) plane).
+
+A stretch passed twice gives a run of matching pairs; geometry is checked once per place:
+a pair is kept only if no more confident pair lies within ``place_radius`` nodes on both ends.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .pairs import Pairs
+
+
+class PlaceGrid:
+    """Node pairs (a, b) bucketed on a grid of ``radius + 1`` nodes, so that the pairs within
+    ``radius`` nodes of a pair on both ends are found in nine buckets, not among all pairs."""
+
+    def __init__(self, radius: int):
+        self.radius = max(int(radius), 0)
+        self.cell = self.radius + 1
+        self.buckets: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+
+    def add(self, a: int, b: int, item: int = -1) -> None:
+        self.buckets.setdefault((a // self.cell, b // self.cell), []).append((a, b, item))
+
+    def near(self, a: int, b: int) -> list[int]:
+        """The items of the pairs within ``radius`` nodes of (a, b) on both ends."""
+        ka, kb, r = a // self.cell, b // self.cell, self.radius
+        return [item for da in (-1, 0, 1) for db in (-1, 0, 1)
+                for u, w, item in self.buckets.get((ka + da, kb + db), ())
+                if abs(u - a) <= r and abs(w - b) <= r]
+
+
+def one_per_place(pairs: Pairs, radius: int) -> np.ndarray:
+    """Stage 3: a mask of the pairs kept: no more ``confident`` pair within ``radius`` nodes on
+    both ends (ties go to the earlier pair)."""
+    keep = np.ones(len(pairs), bool)
+    kept = PlaceGrid(radius)
+    for i in np.lexsort((pairs.b, pairs.a, -pairs.confidence)):
+        ai, bi = int(pairs.a[i]), int(pairs.b[i])
+        if kept.near(ai, bi):
+            keep[i] = False
+        else:
+            kept.add(ai, bi)
+    return keep

@@ -1,0 +1,132 @@
+"""The ``verified`` method: loop closure by retrieval, evidence and one robust pose graph.
+
+The stages, in the order ``detect_loops`` runs them; each takes one plain value and gives
+the next, and every number it reads is a ``MapParams`` entry (``engine.params.PARAMETERS``):
+
+1. ``retrieve.candidates``   each node's best matches, calibrated            -> Pairs
+2. ``retrieve.with_support`` the mean calibrated score along the stretch      -> Pairs
+3. ``places.one_per_place``  one pair per place                               -> Pairs (+ set aside)
+4. ``geometry.measure``      two-view geometry on the sphere, confidence     -> Pairs (measured)
+5. ``tiers.tiers``           auto / candidate / dropped by a table of rules  -> statuses
+6. ``tiers.nearest``         a pair not automatic moves to its place's closest views
+7. ``pose_graph.solve``      consistency: a robust pose graph of steps and automatic loops;
+                             the loops it rejects go to the queue with the reason, candidates
+                             it puts far apart are dropped                   -> LoopResult
+
+Expensive results (retrieval, background statistics, two-view fits) live in ``cache``, so a
+re-map after a threshold change costs the arithmetic, not the retrieval or the geometry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+from ..params import MapParams
+from . import pose_graph
+from .geometry import PairGeometry
+from .pairs import LoopCandidate, Pairs, Status
+from .places import one_per_place
+from .retrieve import candidates, descriptor_rank, with_support
+from .tiers import nearest, tiers
+
+
+@dataclass
+class LoopResult:
+    """What ``detect_loops`` finds: the loops (sorted by (a, b)) and, where the pose graph was
+    solved, every node's estimated pose (x, y in node steps, heading in degrees)."""
+
+    loops: list
+    poses: Optional[np.ndarray] = None
+
+
+def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarray, features=None,
+                 columns=None, shifts=None, frame_width: int = 0, cache: Optional[dict] = None,
+                 chain_starts: Sequence[int] = (0,)) -> LoopResult:
+    """Stages 1-7 on node descriptors ``vectors`` (m, d). ``node_rows`` are the nodes' rows in
+    the recording (features are per row); without ``features`` there is no geometry and no
+    pose graph, and automatic loops need score and support. ``chain_starts``: the first node
+    of every recording (several recordings are chains joined only by loops)."""
+    cache = {} if cache is None else cache
+    v = np.asarray(vectors, np.float32)
+    m = v.shape[0]
+    shifts = np.zeros(m, np.int64) if shifts is None else np.asarray(shifts, np.int64)
+    geometry = PairGeometry(features, node_rows, shifts, frame_width, columns, cache)
+    if m <= params.neighbor_node_num + 1:
+        return LoopResult([], _path_only(geometry, params, m, chain_starts))
+    pairs = with_support(v, candidates(v, params, cache), params, cache)              # 1, 2
+    floor = params.candidate_z - params.geometry_margin_z
+    pairs = pairs.take((pairs.score >= floor) | (np.nan_to_num(pairs.support, nan=-np.inf) >= floor))
+    pairs.confidence = descriptor_rank(pairs)
+    kept = one_per_place(pairs, params.place_radius)                                 # 3
+    set_aside, pairs = pairs.take(~kept), pairs.take(kept)
+    pairs = geometry.measure(pairs, params)                                         # 4
+    status, rule = tiers(pairs, params)                                             # 5
+    pairs, status, rule = nearest(pairs, status, rule, set_aside, v, geometry, params, cache)   # 6
+    status, reason, closure, poses = consistent(pairs, status, geometry, params, m, chain_starts)  # 7
+    out = [LoopCandidate(a=int(pairs.a[i]), b=int(pairs.b[i]), similarity=float(pairs.cosine[i]), window_count=0,
+                         yaw=float(pairs.yaw[i]) if np.isfinite(pairs.yaw[i]) else None,
+                         score=float(pairs.score[i]), status=str(status[i]),
+                         evidence=_evidence(pairs, i, rule[i], reason[i], closure[i]))
+           for i in np.flatnonzero(status != Status.DROPPED.value)]
+    out.sort(key=lambda lc: (lc.a, lc.b))
+    return LoopResult(out, poses)
+
+
+def _path_only(geometry: PairGeometry, params: MapParams, m: int, chain_starts) -> Optional[np.ndarray]:
+    steps = geometry.steps(params)
+    if steps is None:
+        return None
+    empty = np.zeros(0, np.int64)
+    return pose_graph.solve(m, steps, pose_graph.Loops(empty, empty, np.zeros(0)), params, chain_starts).poses
+
+
+def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params: MapParams, m: int,
+               chain_starts) -> tuple:
+    """Stage 7: (status, reason, closure, poses). The automatic loops and the steps make one
+    robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a candidate
+    with the reason; a candidate whose ends the solved map puts further apart than
+    ``closure_slack`` + ``closure_rate`` per step of the graph between them is dropped (weak
+    evidence, and the map against it). ``closure``: the ends' distance in the solved map,
+    node steps (NaN without geometry)."""
+    n = len(pairs)
+    reason = np.full(n, "", dtype=object)
+    closure = np.full(n, np.nan)
+    steps = geometry.steps(params)
+    if steps is None:
+        return status, reason, closure, None
+    auto = np.flatnonzero(status == Status.AUTO.value)
+    loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto])
+    solution = pose_graph.solve(m, steps, loops, params, chain_starts,
+                                extra_keys=np.concatenate([pairs.a, pairs.b]))
+    xy = solution.poses[:, :2]
+    closure = np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1)
+    status = status.copy()
+    rejected = auto[~solution.kept]
+    status[rejected] = Status.CANDIDATE.value
+    reason[rejected] = "the pose graph rejects it: the path and the other loops disagree"
+    cand = np.flatnonzero(status == Status.CANDIDATE.value)
+    cand = np.setdiff1d(cand, rejected)
+    if cand.size:
+        tolerance = params.closure_slack + params.closure_rate * solution.hops(pairs.a[cand], pairs.b[cand])
+        status[cand[closure[cand] > tolerance]] = Status.DROPPED.value
+    return status, reason, closure, solution.poses
+
+
+def _evidence(pairs: Pairs, i: int, rule: str, reason: str, closure: float) -> dict:
+    known = pairs.inliers[i] >= 0
+
+    def num(arr, cast=float):
+        return cast(arr[i]) if arr is not None and np.isfinite(arr[i]) else None
+
+    return {"score": float(pairs.score[i]), "support": num(pairs.support), "direction": int(pairs.direction[i]),
+            "matches": int(pairs.matches[i]) if known else None, "inliers": int(pairs.inliers[i]) if known else None,
+            "inlier_ratio": num(pairs.inlier_ratio) if known else None,
+            "path_inliers": int(pairs.path_inliers[i]) if known else None,
+            "step_inliers": int(pairs.step_inliers[i]) if known else None,
+            "confidence": float(pairs.confidence[i]),
+            "closure": float(closure) if np.isfinite(closure) else None,
+            "plane_share": num(pairs.plane_share), "distance_steps": num(pairs.distance_steps),
+            "rule": str(rule) or None, "reason": str(reason) or None}

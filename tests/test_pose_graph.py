@@ -1,0 +1,96 @@
+"""Stage 7, the robust pose graph, on paths whose answer is known: a driven square."""
+
+import numpy as np
+
+from engine.loops.pairs import Steps
+from engine.loops.pose_graph import Loops, solve
+from engine.params import MapParams
+
+SIDE = 10   # node steps per side of the square
+
+
+def _square(laps: int = 2, noise_deg: float = 0.0, seed: int = 0):
+    """Steps of a square driven ``laps`` times (a left turn at each corner), camera facing
+    forward: each step moves one unit straight ahead."""
+    rng = np.random.default_rng(seed)
+    n = 4 * SIDE * laps
+    yaw = np.zeros(n)
+    yaw[SIDE - 1::SIDE] = 90.0
+    yaw = yaw + rng.normal(0.0, noise_deg, n) if noise_deg else yaw
+    steps = Steps(yaw=yaw, motion=np.zeros(n), still=np.zeros(n, bool), ambiguous=np.abs(yaw) > 90.0)
+    return n + 1, steps
+
+
+def _true_xy(m: int) -> np.ndarray:
+    xy, pos, heading = [], np.zeros(2), 0.0
+    for k in range(m):
+        xy.append(pos.copy())
+        pos = pos + [np.cos(np.radians(heading)), np.sin(np.radians(heading))]
+        if k % SIDE == SIDE - 1:
+            heading += 90.0
+    return np.array(xy)
+
+
+def test_true_loops_of_a_second_lap_are_kept_and_close_the_square():
+    m, steps = _square(noise_deg=1.0)
+    a = np.arange(0, 4 * SIDE, 5)
+    loops = Loops(a=a, b=a + 4 * SIDE, yaw=np.zeros(a.size))
+    sol = solve(m, steps, loops, MapParams())
+    assert sol.kept.all()
+    xy = sol.poses[:, :2]
+    assert np.max(np.linalg.norm(xy[a] - xy[a + 4 * SIDE], axis=1)) < 1.0
+    assert np.max(np.linalg.norm(xy - _true_xy(m), axis=1)) < 3.0
+
+
+def test_a_loop_to_a_look_alike_place_across_the_square_is_rejected_and_the_true_ones_kept():
+    m, steps = _square(noise_deg=1.0)
+    a = np.arange(0, 4 * SIDE, 5)
+    false_a, false_b = 3, 4 * SIDE + 2 * SIDE + 5          # the far side of the square, ~10 steps away
+    loops = Loops(a=np.append(a, false_a), b=np.append(a + 4 * SIDE, false_b), yaw=np.zeros(a.size + 1))
+    sol = solve(m, steps, loops, MapParams())
+    assert sol.kept[:-1].all()
+    assert not sol.kept[-1]
+
+
+def test_a_step_misread_as_a_half_turn_is_outvoted_by_the_loops_across_it():
+    m, steps = _square()
+    bad = 4 * SIDE + SIDE // 2                              # mid-side on the second lap
+    steps.yaw[bad] = 180.0
+    steps.ambiguous[bad] = True
+    a = np.arange(0, 4 * SIDE, 3)
+    loops = Loops(a=a, b=a + 4 * SIDE, yaw=np.zeros(a.size))
+    sol = solve(m, steps, loops, MapParams())
+    assert bad in sol.outvoted_steps.tolist()
+    assert sol.kept.mean() > 0.9
+    xy = sol.poses[:, :2]
+    assert np.max(np.linalg.norm(xy - _true_xy(m), axis=1)) < 3.0
+
+
+def test_a_true_half_turn_stands_where_no_loop_disagrees():
+    m, steps = _square(laps=1)
+    steps.yaw[5] = 180.0                                    # the robot turns round mid-side...
+    steps.ambiguous[5] = True
+    sol = solve(m, steps, Loops(np.zeros(0, int), np.zeros(0, int), np.zeros(0)), MapParams())
+    assert sol.outvoted_steps.size == 0
+    # ...and drives back over where it came from: node 7 is where node 5 was
+    assert np.linalg.norm(sol.poses[7, :2] - sol.poses[5, :2]) < 0.5
+
+
+def test_two_recordings_are_two_chains_joined_only_by_loops():
+    m1, s1 = _square(laps=1)
+    # the second recording drives the same square starting 5 nodes into the first's lap
+    steps = Steps(yaw=np.concatenate([s1.yaw, [0.0], np.roll(s1.yaw, -5)]), motion=np.zeros(2 * (m1 - 1) + 1),
+                  still=np.zeros(2 * (m1 - 1) + 1, bool), ambiguous=np.zeros(2 * (m1 - 1) + 1, bool))
+    a = np.arange(5, 4 * SIDE, 4)
+    b = m1 + (a - 5)
+    sol = solve(2 * m1, steps, Loops(a=a, b=b, yaw=np.zeros(a.size)), MapParams(), chain_starts=[0, m1])
+    assert sol.kept.all()
+    assert np.linalg.norm(sol.poses[m1, :2] - sol.poses[5, :2]) < 1.0
+    assert np.isfinite(sol.poses).all()
+
+
+def test_hops_follow_the_path_and_the_kept_loops():
+    m, steps = _square()
+    loops = Loops(a=np.array([0]), b=np.array([4 * SIDE]), yaw=np.zeros(1))
+    sol = solve(m, steps, loops, MapParams(), extra_keys=[1, 4 * SIDE + 1])
+    assert sol.hops(np.array([1]), np.array([4 * SIDE + 1]))[0] <= 3
