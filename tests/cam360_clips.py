@@ -49,8 +49,14 @@ def v360(rgb: np.ndarray, args: str) -> np.ndarray:
 
 
 def dual_fisheye(rgb: np.ndarray, fov: float, lens: int) -> np.ndarray:
-    """Two ``lens`` x ``lens`` fisheye images side by side (FFmpeg's dfisheye)."""
-    return v360(rgb, f"input=e:output=dfisheye:h_fov={fov:g}:v_fov={fov:g}:w={2 * lens}:h={lens}")
+    """Two ``lens`` x ``lens`` fisheye images side by side (FFmpeg's dfisheye), black outside
+    each lens's image circle as a camera's sensor sees it."""
+    out = v360(rgb, f"input=e:output=dfisheye:h_fov={fov:g}:v_fov={fov:g}:w={2 * lens}:h={lens}")
+    yy, xx = np.mgrid[0:lens, 0:lens]
+    outside = np.hypot(yy - (lens - 1) / 2.0, xx - (lens - 1) / 2.0) > lens / 2.0
+    out[:, :lens][outside] = 0
+    out[:, lens:][outside] = 0
+    return out
 
 
 def gopro_strips(rgb: np.ndarray, face: int, extra: int) -> tuple[np.ndarray, np.ndarray]:

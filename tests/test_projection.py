@@ -246,3 +246,28 @@ def test_panotopo_maps_a_dual_fisheye_bag_with_one_projection_option(tmp_path, c
     assert code == 0, lines
     g = nx.read_graphml(out)
     assert g.graph["projection"] == "dual-fisheye" and g.number_of_nodes() >= 1
+
+
+def test_side_by_side_fisheyes_in_a_plain_file_are_refused_until_the_option_says_what_they_are(tmp_path):
+    """A 2:1 frame of two fisheyes has a panorama's shape: read as one it would be a wrong
+    picture with exit 0. The black around the image circles gives it away."""
+    from engine.sources.projection import looks_like_dual_fisheye
+
+    assert looks_like_dual_fisheye(clips.dual_fisheye(clips.panorama(0), 190.0, 128))
+    assert not looks_like_dual_fisheye(clips.panorama(0))
+    assert not looks_like_dual_fisheye(np.zeros((128, 256, 3), np.uint8))    # a black frame is no lens
+    path = clips.write_insv(tmp_path / "exported.mp4", frames=4)             # no .insv to say so
+    with pytest.raises(InputError) as err:
+        open_recording(path)
+    assert "--projection dual-fisheye" in str(err.value) and "\n" not in str(err.value)
+    with open_recording(path, projection="dual-fisheye:fov=200") as src:
+        assert error(next(iter(src.frames(1.0))).rgb, 0) < TOL
+    with open_recording(path, projection="equirect") as src:                  # the user's word wins
+        assert isinstance(src, VideoSource)
+    pytest.importorskip("rosbags")
+    from test_sources_data import ros1_image, write_messages_bag
+
+    bag = write_messages_bag(tmp_path / "dfe.bag", [("/cam", 1.0, ros1_image(clips.dual_fisheye(
+        clips.panorama(0), 190.0, clips.H), 1.0))])
+    with pytest.raises(InputError, match="--projection dual-fisheye"):
+        open_recording(bag)

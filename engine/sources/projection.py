@@ -266,6 +266,35 @@ def detect_projection(path: Path, given: Optional[Projection] = None) -> Project
     return projection_from_streams(shapes, Path(path).suffix, given, pair)
 
 
+# Two lens images side by side have a panorama's 2:1 shape; what gives them away is the black
+# outside each lens's image circle. Corners: farther than CORNER_RADIUS (in units of the half's
+# height) from a half's centre (the image circle's radius is 0.5); the inside: nearer than 0.4.
+CORNER_RADIUS = 0.56
+CORNER_MAX_MEAN, CORNER_MAX_STD, INSIDE_MIN_MEAN = 16.0, 8.0, 24.0
+
+
+def looks_like_dual_fisheye(rgb: np.ndarray) -> bool:
+    """Whether a 2:1 frame is two fisheye images side by side: in both halves the corners
+    outside the image circle are black (brightest channel mean under 16, spread under 8, room
+    for codec noise) while the picture inside is not. An equirectangular panorama has sky,
+    ceiling or ground there, not four uniform black corners in each half."""
+    if rgb.ndim != 3 or rgb.shape[1] != 2 * rgb.shape[0] or rgb.shape[0] < 16:
+        return False
+    h = rgb.shape[0]
+    step = max(1, h // 128)   # a coarse grid is enough, and cheap on 4K frames
+    small = rgb[::step, ::step]
+    hs = small.shape[0]
+    yy, xx = np.mgrid[0:hs, 0:hs]
+    r = np.hypot(yy - (hs - 1) / 2.0, xx - (hs - 1) / 2.0) / hs
+    corner, inside = r > CORNER_RADIUS, r < 0.4
+    for half in (small[:, :hs], small[:, hs:2 * hs]):
+        bright = half.max(axis=2).astype(np.float32)
+        if not (bright[corner].mean() < CORNER_MAX_MEAN and bright[corner].std() < CORNER_MAX_STD
+                and bright[inside].mean() > INSIDE_MIN_MEAN):
+            return False
+    return True
+
+
 # --------------------------------------------------------------------------- geometry
 
 def check_shapes(p: Projection, shapes: Sequence[tuple[int, int]]) -> None:
