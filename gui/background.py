@@ -1,83 +1,147 @@
-"""Background work off the UI thread: one small API for every job the window hands off.
+"""Background work off the UI thread: ONE mechanism for every job the app hands off.
 
-* ``LatestOnly``: runs a plain function in a QThread and hands its result (or its
-  error) to a callback on the UI thread. One job runs at a time; a request made while
-  one runs waits, and a newer request replaces a waiting one; the result of a job that
-  was superseded meanwhile is dropped (newest request wins). ``stop`` waits for the
-  running job (quit + wait) and must be called before the owner dies.
-  The map re-build on a parameter change and the similarity matrix use it.
-* ``call_in_background``: one blocking call (opening and indexing a long recording)
-  with the window still painting and a busy dialog when it takes a while.
+``Worker`` runs plain functions on a thread of its own and hands each result (or
+error) to a callback on the UI thread. It is used by the pipeline run
+(``gui.worker.RunController``), the map re-build on a parameter change, the
+similarity matrix, the graph layout, frame decoding (``gui.frame_loader``) and the
+pair view's feature matching. Its rules:
 
-The pipeline run (``gui.worker.RunController``) has its own worker because it reports
-progress and can be cancelled midway.
+* run-latest-only: one job runs at a time; a request made while one runs waits, and a
+  newer request replaces a waiting one. The result of a job superseded meanwhile is
+  dropped (newest request wins), unless the worker was made with
+  ``deliver_superseded=True`` (frame decoding: every decoded frame is worth showing).
+* cancel: ``cancel()`` drops the waiting request and the running job's result, and
+  sets the running job's ``cancel`` event (``submit(..., takes_job=True)`` hands the
+  function a ``Job`` with that event and a ``progress(done, total, stage)`` reporter).
+* a job is handed the data it works on, copied on the UI thread (a snapshot): it never
+  reads state the user may change while it runs.
+* ``stop()`` cancels and waits for the thread (quit + wait); every owner calls it
+  before it dies. A thread also ends by itself when no work is left, so an idle app
+  holds no thread.
+
+``call_in_background`` is a blocking call (opening and indexing a long recording)
+with the window still painting and a busy dialog when it takes a while; it runs on
+the same kind of thread.
 """
 
 from __future__ import annotations
 
+import threading
 from typing import Callable, Optional, TypeVar
 
-from PySide6.QtCore import QEventLoop, QObject, Qt, QThread, Slot
+from PySide6.QtCore import QEventLoop, QObject, Qt, QThread, Signal, Slot
 from PySide6.QtWidgets import QProgressDialog, QWidget
 
 T = TypeVar("T")
 SHOW_AFTER_MS = 300  # a quick open shows no dialog at all
 
 
-class _Call(QThread):
-    def __init__(self, fn: Callable[[], T]) -> None:
+class Job:
+    """What a function run with ``takes_job=True`` gets: a cancel event and a progress reporter."""
+
+    def __init__(self, worker: "Worker", ticket: int) -> None:
+        self.cancel = threading.Event()
+        self._worker, self._ticket = worker, ticket
+
+    def progress(self, done: int, total: int, stage: str) -> None:
+        """Report progress (from the worker thread; shown on the UI thread, if still current)."""
+        self._worker._progress.emit(self._ticket, int(done), int(total), str(stage))
+
+
+class _Thread(QThread):
+    """Runs the worker's waiting jobs until there is none left, then ends."""
+
+    def __init__(self, worker: "Worker") -> None:
         super().__init__()
-        self.fn = fn
-        self.value = None
-        self.error: BaseException | None = None
+        self.worker = worker
 
     def run(self) -> None:
-        try:
-            self.value = self.fn()
-        except BaseException as exc:  # handed back to the UI thread
-            self.error = exc
+        while (task := self.worker._take()) is not None:
+            ticket, fn, job = task
+            value, error = None, None
+            try:
+                value = fn(job) if job is not None else fn()
+            except BaseException as exc:  # handed back to the UI thread
+                error = exc
+            self.worker._done_running(ticket, value, error)
 
 
-class LatestOnly(QObject):
-    """Run functions off the UI thread, newest request wins (see the module docstring)."""
+class Worker(QObject):
+    """See the module docstring."""
 
-    def __init__(self, parent: Optional[QObject] = None) -> None:
+    progress = Signal(int, int, str)              # the current job's progress (UI thread)
+    _progress = Signal(int, int, int, str)        # ticket, done, total, stage (from the thread)
+    _result = Signal(int, object, object)         # ticket, value, error (from the thread)
+
+    def __init__(self, parent: Optional[QObject] = None, deliver_superseded: bool = False) -> None:
         super().__init__(parent)
-        self._running: Optional[_Call] = None
-        self._running_ticket = 0
-        self._pending: Optional[tuple[int, Callable, Callable, Optional[Callable]]] = None
+        self.deliver_superseded = deliver_superseded
+        self._lock = threading.Lock()
+        self._pending: Optional[tuple] = None     # (ticket, fn, takes_job)
+        self._running: Optional[tuple[int, Optional[Job]]] = None
+        self._active = False                      # a thread is taking jobs
+        self._threads: list[_Thread] = []
         self._ticket = 0
-        self._handlers: dict[int, tuple[Callable, Optional[Callable]]] = {}
+        self._undelivered = 0
+        self._handlers: dict[int, tuple[Optional[Callable], Optional[Callable]]] = {}
+        self._result.connect(self._deliver, Qt.QueuedConnection)
+        self._progress.connect(self._relay_progress, Qt.QueuedConnection)
 
+    # -- the UI thread's side ------------------------------------------------------------
     @property
     def busy(self) -> bool:
-        return self._running is not None or self._pending is not None
+        """A job waits, runs, or its result is not handed over yet."""
+        with self._lock:
+            return self._pending is not None or self._running is not None or self._undelivered > 0
 
-    def submit(self, fn: Callable[[], T], done: Callable[[T], None],
-               failed: Optional[Callable[[BaseException], None]] = None) -> int:
-        """Run ``fn()`` in a thread; ``done(value)`` or ``failed(error)`` later on this thread.
-
-        Returns the request's ticket; only the newest ticket's callbacks are ever called.
-        """
-        self._ticket += 1
-        self._pending = (self._ticket, fn, done, failed)
-        if self._running is None:
-            self._start_pending()
+    @property
+    def ticket(self) -> int:
+        """The newest request's ticket (its result is the one delivered)."""
         return self._ticket
 
+    def submit(self, fn: Callable, done: Optional[Callable] = None, failed: Optional[Callable] = None,
+               takes_job: bool = False, cancel_running: bool = False) -> int:
+        """Run ``fn()`` (``fn(job)`` with ``takes_job``) off the UI thread; ``done(value)`` or
+        ``failed(error)`` later on the UI thread. ``cancel_running``: set the running job's
+        cancel event (a new run supersedes the old one). Returns the request's ticket."""
+        with self._lock:
+            self._ticket += 1
+            ticket = self._ticket
+            if self._pending is not None:
+                self._handlers.pop(self._pending[0], None)
+            self._pending = (ticket, fn, takes_job)
+            self._handlers[ticket] = (done, failed)
+            if cancel_running and self._running is not None and self._running[1] is not None:
+                self._running[1].cancel.set()
+            start = not self._active
+            self._active = True
+        if start:
+            self._threads = [t for t in self._threads if not t.isFinished()]
+            thread = _Thread(self)
+            self._threads.append(thread)
+            thread.start()
+        return ticket
+
     def cancel(self) -> None:
-        """Drop the waiting request and the result of the running one."""
-        self._pending = None
-        self._ticket += 1
+        """Drop the waiting request and the running job's result; ask the running job to stop."""
+        with self._lock:
+            if self._pending is not None:
+                self._handlers.pop(self._pending[0], None)
+            self._pending = None
+            self._ticket += 1
+            if self._running is not None and self._running[1] is not None:
+                self._running[1].cancel.set()
 
     def stop(self) -> None:
-        """Cancel, and wait until the running thread has ended (call before the owner dies)."""
+        """Cancel, and wait until the threads have ended (call before the owner dies)."""
         self.cancel()
-        call, self._running = self._running, None
-        if call is not None:
-            call.quit()
-            call.wait()
-            call.deleteLater()
+        for thread in self._threads:
+            thread.quit()
+            thread.wait()
+        self._threads = []
+        with self._lock:
+            self._handlers.clear()
+            self._undelivered = 0
 
     def wait(self, timeout_ms: int = 60_000) -> bool:
         """Process events until nothing runs or waits (for scripts and tests)."""
@@ -85,55 +149,73 @@ class LatestOnly(QObject):
 
         deadline = QDeadlineTimer(timeout_ms)
         while self.busy and not deadline.hasExpired():
-            if self._running is not None:
-                self._running.wait(20)
+            for thread in self._threads:
+                thread.wait(10)
             QCoreApplication.processEvents()
         return not self.busy
 
-    def _start_pending(self) -> None:
-        ticket, fn, done, failed = self._pending
-        self._pending = None
-        call = _Call(fn)
-        self._running, self._running_ticket = call, ticket
-        self._handlers = {ticket: (done, failed)}
-        call.finished.connect(self._finished, Qt.QueuedConnection)
-        call.start()
-
-    @Slot()
-    def _finished(self) -> None:
-        call, ticket = self._running, self._running_ticket
-        if call is None or self.sender() is not call:
-            return  # a thread already stopped (and waited for) by stop()
-        call.wait()
-        self._running = None
-        done, failed = self._handlers.pop(ticket, (None, None))
-        call.deleteLater()
-        if self._pending is not None:
-            self._start_pending()
-        if ticket != self._ticket:
+    @Slot(int, object, object)
+    def _deliver(self, ticket: int, value, error) -> None:
+        with self._lock:
+            self._undelivered = max(self._undelivered - 1, 0)
+            done, failed = self._handlers.pop(ticket, (None, None))
+            current = ticket == self._ticket
+        if not current and not self.deliver_superseded:
             return  # superseded by a newer request (or cancelled): the user asked for something else
-        if call.error is not None:
+        if error is not None:
             if failed is None:
-                raise call.error
-            failed(call.error)
+                raise error
+            failed(error)
         elif done is not None:
-            done(call.value)
+            done(value)
+
+    @Slot(int, int, int, str)
+    def _relay_progress(self, ticket: int, done: int, total: int, stage: str) -> None:
+        if ticket == self._ticket:
+            self.progress.emit(done, total, stage)
+
+    # -- the thread's side ---------------------------------------------------------------
+    def _take(self) -> Optional[tuple]:
+        with self._lock:
+            if self._pending is None:
+                self._active = False   # no work left: the thread ends
+                return None
+            ticket, fn, takes_job = self._pending
+            self._pending = None
+            job = Job(self, ticket) if takes_job else None
+            self._running = (ticket, job)
+            self._undelivered += 1
+            return ticket, fn, job
+
+    def _done_running(self, ticket: int, value, error) -> None:
+        with self._lock:
+            self._running = None
+        try:
+            self._result.emit(ticket, value, error)
+        except RuntimeError:   # the worker object is gone (its owner died): nothing to tell
+            pass
+
+
+# The name the window's code used for the same thing.
+LatestOnly = Worker
 
 
 def call_in_background(parent: QWidget, label: str, fn: Callable[[], T]) -> T:
-    call = _Call(fn)
+    """``fn()`` on a worker thread while the UI thread keeps painting; its value, or its error raised."""
+    worker = Worker()
+    out: dict = {}
+    loop = QEventLoop()
     dialog = QProgressDialog(label, None, 0, 0, parent)  # no cancel: the pass cannot stop halfway
     dialog.setWindowTitle("panotopo")
     dialog.setWindowModality(Qt.ApplicationModal)
     dialog.setMinimumDuration(SHOW_AFTER_MS)
-    loop = QEventLoop()
-    call.finished.connect(loop.quit)
-    call.start()
-    if not call.isFinished():
+    worker.submit(fn, lambda v: (out.setdefault("value", v), loop.quit()),
+                  lambda e: (out.setdefault("error", e), loop.quit()))
+    if not out:
         loop.exec()
-    call.wait()  # a QThread must not die while running
+    worker.stop()   # the thread has ended before the worker goes
     dialog.reset()
     dialog.deleteLater()
-    if call.error is not None:
-        raise call.error
-    return call.value
+    if "error" in out:
+        raise out["error"]
+    return out.get("value")

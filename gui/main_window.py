@@ -26,7 +26,7 @@ from engine.params import MapParams
 from engine.session_fields import LABEL_MAX
 from engine.session import Session, autosave_path_for, is_session_file, session_path_for
 
-from .background import LatestOnly
+from .background import Worker
 from .commands import ChangeParams, QtHistory
 from .document import Document, LoopKey
 from .eval_panel import EvalPanel
@@ -78,8 +78,8 @@ class MainWindow(QMainWindow):
         self.doc.preparers["layout"] = path_layout  # the graph view's layout, made with each re-map
         self.shortcuts = shortcut_table(self.defaults["shortcuts"])
         self.runner = RunController(self)
-        self.remapper = LatestOnly(self)           # build_map on a parameter change, off the UI thread
-        self.similarity_worker = LatestOnly(self)  # the similarity matrix, off the UI thread
+        self.remapper = Worker(self)           # build_map on a parameter change, off the UI thread
+        self.similarity_worker = Worker(self)  # the similarity matrix, off the UI thread
         self.advance_after_decision = bool(self.defaults["ui"].get("advance_after_decision", True))
         self._pending_decisions: Optional[dict] = None
         self._preparing_run: Optional[FinishedRun] = None  # a finished run whose map is being prepared
@@ -652,7 +652,7 @@ class MainWindow(QMainWindow):
         from engine.descriptors.cache import DescriptorCache
 
         if self.runner.running:
-            self.runner.stop()
+            self.runner.cancel()   # the new run waits for the old one to stop at its next check
         self._preparing_run = None  # a new run supersedes the map being prepared
         self._show_progress(True)
         self._progress_stage = ""
@@ -825,8 +825,6 @@ class MainWindow(QMainWindow):
             return
         if isinstance(exc, InputError):
             self.warn(str(exc))
-        elif isinstance(exc, RuntimeError) and "changed size during iteration" in str(exc):
-            self._remap(params)  # a manual loop was added while the worker read the decisions
         else:
             self.error(f"unexpected error: {exc.__class__.__name__}: {exc}")
 

@@ -13,7 +13,6 @@ above. A pair without geometry still shows aligned. Decision buttons sit below.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Optional
 
 import numpy as np
@@ -23,6 +22,7 @@ from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QPushButton, QSize
 
 from .document import Document, LoopKey
 from .frame_cache import FrameCache
+from .background import Worker
 from .pair_evidence import MatchCache, PairMatches, evidence_lines, match_segments
 from .style import INLIER_COLOR, OUTLIER_COLOR, STATUS_COLORS, panorama_view
 
@@ -53,8 +53,10 @@ class PairView(QWidget):
         # Where the matched features of a pair come from (None: no geometry).
         self.match_cache = MatchCache(doc, cache)
         self.matches_for: Optional[MatchesFor] = self.match_cache
-        # The geometry of a new pair is computed in one background thread (~0.2-0.8 s a pair).
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pair-matches")
+        # The geometry of a new pair is computed off the UI thread (~0.2-0.8 s a pair) by the
+        # app's one background mechanism; the newest pair asked for is computed next, and a
+        # pair finished meanwhile is announced too (its matches are in the cache).
+        self.match_worker = Worker(self, deliver_superseded=True)
         self._closed = False   # set by shutdown: no new background work
         self._pending: set = set()
         # Queued even when emitted in this thread: a pair finished before its done callback is
@@ -282,15 +284,13 @@ class PairView(QWidget):
         if self._closed:
             return None, False
         if key not in self._pending:
-            self._pending.add(key)
-            future = self._pool.submit(self.match_cache, key)
-            future.add_done_callback(lambda f, k=key: None if f.cancelled() else self._announce(k))
+            self._pending = {key}   # a pair still waiting is replaced by this one (newest wins)
+            self.match_worker.submit(lambda k=key: self.match_cache(k), lambda _m, k=key: self._announce(k),
+                                     lambda _exc, k=key: self._announce(k))
         return None, True
 
     def _announce(self, key) -> None:
-        """In the worker thread: tell the UI thread (queued) that ``key`` is done. A future
-        cancelled by ``shutdown`` calls back in the UI thread, inside the pool's shutdown:
-        it announces nothing (a refresh would submit to the closing pool and wait forever)."""
+        """On the UI thread: ``key``'s matches are in the cache (queued, so never inside refresh)."""
         if self._closed:
             return
         try:
@@ -306,7 +306,7 @@ class PairView(QWidget):
     def shutdown(self) -> None:
         """Stop the background matching (the window closes)."""
         self._closed = True
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        self.match_worker.stop()
 
     def _map_replaced(self) -> None:
         self.match_cache.clear()

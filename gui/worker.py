@@ -1,24 +1,21 @@
-"""The pipeline run off the UI thread: a QObject worker moved to a QThread.
-
-``RunController`` owns the thread and must be stopped (``stop``) before its owner
-dies: a QThread destroyed while running aborts the process. A cancelled or failed
-run delivers no result, so the current map and decisions stay untouched.
-"""
+"""The pipeline run off the UI thread, on the app's one background mechanism
+(``gui.background.Worker``): a run job, its result, and a controller that relays it."""
 
 from __future__ import annotations
 
 import sys
-import threading
 import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
 
-from PySide6.QtCore import QObject, QThread, Signal, Slot
+from PySide6.QtCore import QObject, Signal
 
 from engine.errors import Cancelled, InputError
 from engine.params import MapParams
+
+from .background import Job, Worker
 
 
 @dataclass
@@ -39,42 +36,23 @@ class FinishedRun:
     seconds: float
 
 
-class PipelineWorker(QObject):
-    progress = Signal(int, int, str)
-    finished = Signal(object)     # FinishedRun
-    failed = Signal(str)
-    cancelled = Signal()
+def run_job(job: RunJob, work: Job) -> FinishedRun:
+    """The pipeline run itself (on the worker thread): ``engine.run.run`` with the job's
+    cancel event and progress reporter."""
+    from engine.run import run
 
-    def __init__(self, job: RunJob, cancel: threading.Event) -> None:
-        super().__init__()
-        self.job = job
-        self.cancel = cancel
-
-    @Slot()
-    def run(self) -> None:
-        from engine.run import run
-
-        t0 = time.monotonic()
-        try:
-            out = run(self.job.path, self.job.params, settings=self.job.settings, progress=self._progress,
-                      cancel=self.cancel, cache=self.job.cache)
-            descs, topomap = out.descs, out.topomap
-        except Cancelled:
-            self.cancelled.emit()
-        except InputError as exc:
-            self.failed.emit(str(exc))
-        except Exception as exc:  # a bug: keep the app alive, say what happened
-            traceback.print_exc(file=sys.stderr)
-            self.failed.emit(f"unexpected error: {exc.__class__.__name__}: {exc}")
-        else:
-            self.finished.emit(FinishedRun(self.job, descs, topomap, time.monotonic() - t0))
-
-    def _progress(self, done: int, total: int, stage: str) -> None:
-        self.progress.emit(int(done), int(total), str(stage))
+    t0 = time.monotonic()
+    out = run(job.path, job.params, settings=job.settings, progress=work.progress, cancel=work.cancel,
+              cache=job.cache)
+    return FinishedRun(job, out.descs, out.topomap, time.monotonic() - t0)
 
 
 class RunController(QObject):
-    """Starts one run at a time and relays its signals to the UI thread."""
+    """Starts one run at a time on a ``gui.background.Worker`` and relays its outcome.
+
+    A cancelled or failed run delivers no result, so the current map and decisions stay
+    untouched; ``stop`` waits for the thread (call it before the owner dies).
+    """
 
     started = Signal()
     progress = Signal(int, int, str)
@@ -84,85 +62,47 @@ class RunController(QObject):
 
     def __init__(self, parent: Optional[QObject] = None) -> None:
         super().__init__(parent)
-        self._thread: Optional[QThread] = None
-        self._worker: Optional[PipelineWorker] = None
-        self._cancel: Optional[threading.Event] = None
+        self.worker = Worker(self)
+        self.worker.progress.connect(self.progress)
+        self._ticket: Optional[int] = None
         self.started_at = 0.0
 
     @property
     def running(self) -> bool:
-        return self._thread is not None
+        return self._ticket is not None
 
     def start(self, job: RunJob) -> None:
         if self.running:
             raise RuntimeError("a run is already in progress")
-        self._cancel = threading.Event()
-        thread = QThread()
-        worker = PipelineWorker(job, self._cancel)
-        worker.moveToThread(thread)
-        thread.started.connect(worker.run)
-        worker.progress.connect(self.progress)
-        worker.finished.connect(self._on_finished)
-        worker.failed.connect(self._on_failed)
-        worker.cancelled.connect(self._on_cancelled)
-        self._thread, self._worker = thread, worker
         self.started_at = time.monotonic()
-        thread.start()
+        self._ticket = self.worker.submit(lambda work: run_job(job, work), self._on_finished, self._on_failed,
+                                          takes_job=True, cancel_running=True)
         self.started.emit()
 
     def cancel(self) -> None:
-        if self._cancel is not None:
-            self._cancel.set()
+        """Ask the run to stop at its next check; ``cancelled`` follows."""
+        if self._ticket is None:
+            return
+        ticket, self._ticket = self._ticket, None
+        self.worker.cancel()          # its result, if it still comes, is dropped
+        if ticket is not None:
+            self.cancelled.emit()
 
     def stop(self) -> None:
         """Cancel and wait until the thread has ended (call before the owner dies)."""
-        if self._thread is None:
-            return
-        self.cancel()
-        thread = self._thread
-        thread.quit()
-        thread.wait()
-        self._teardown()
+        self._ticket = None
+        self.worker.stop()
 
-    def _end(self) -> None:
-        if self._thread is not None:
-            self._thread.quit()
-            self._thread.wait()
-        self._teardown()
-
-    def _teardown(self) -> None:
-        if self._worker is not None:
-            self._worker.deleteLater()
-        if self._thread is not None:
-            self._thread.deleteLater()
-        self._thread = self._worker = None
-        self._cancel = None
-
-    def _stale(self) -> bool:
-        """A signal queued by a worker that was already stopped (window closing)."""
-        return self._worker is None or self.sender() is not self._worker
-
-    @Slot(object)
     def _on_finished(self, result: FinishedRun) -> None:
-        if self._stale():
-            return
-        cancelled = self._cancel is not None and self._cancel.is_set()
-        self._end()
-        if cancelled:  # cancel pressed after the last check: the user asked for no result
+        self._ticket = None
+        self.finished.emit(result)
+
+    def _on_failed(self, exc: BaseException) -> None:
+        self._ticket = None
+        if isinstance(exc, Cancelled):
             self.cancelled.emit()
-        else:
-            self.finished.emit(result)
-
-    @Slot(str)
-    def _on_failed(self, message: str) -> None:
-        if self._stale():
-            return
-        self._end()
-        self.failed.emit(message)
-
-    @Slot()
-    def _on_cancelled(self) -> None:
-        if self._stale():
-            return
-        self._end()
-        self.cancelled.emit()
+        elif isinstance(exc, InputError):
+            self.failed.emit(str(exc))
+        else:  # a bug: keep the app alive, say what happened
+            traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+            self.failed.emit(f"unexpected error: {exc.__class__.__name__}: {exc}")

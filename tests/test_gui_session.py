@@ -338,7 +338,7 @@ def test_closing_during_a_run_stops_the_thread(qtbot, make_window, recording, tm
     assert w.open_path(str(copy_recording(recording, tmp_path)))
     w.params_panel.interval.setValue(0.75)
     w.start_run()
-    thread = w.runner._thread
+    thread = w.runner.worker._threads[-1]     # the run's thread (gui.background.Worker)
     assert thread is not None and thread.isRunning()
     w.close()
     assert not thread.isRunning()

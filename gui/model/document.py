@@ -17,6 +17,7 @@ single point where a write-through journal hooks in.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -218,15 +219,17 @@ class MapDocument:
         """A function for a worker thread: ``build()`` a map and prepare it with today's decisions
         (or with ``decisions``: a session or journal being opened).
 
-        The decisions are read from the map shown now, in the worker; a decision made
-        while it runs bumps ``decision_version`` and ``install`` then refuses the result
-        (the caller asks again), so no decision is ever lost to a re-map.
+        The decisions are copied from the map shown now, here on the UI thread: the worker
+        gets a snapshot and never reads the live map (a decision made while it read them
+        changed a dict under it). A decision made while it runs bumps ``decision_version``
+        and ``is_current`` then refuses the result (the caller asks again), so no decision
+        is ever lost to a re-map.
         """
         old, poses, version = self.topomap, self.poses, self.decision_version
         preparers = dict(self.preparers)
+        carried = copy.deepcopy(decisions if decisions is not None else (old.decisions() if old is not None else {}))
 
         def job() -> PreparedMap:
-            carried = decisions if decisions is not None else (old.decisions() if old is not None else {})
             prepared = prepare_map(build(), carried, poses, preparers)
             prepared.decision_version = version
             return prepared
