@@ -317,3 +317,22 @@ def test_undefined_metrics_print_na_not_zero():
     assert "precision n/a" in text and "recall n/a" in text and "F1 n/a" in text
     assert "accuracy 1.000" in text
     assert set(_evaluation_dict(ev)["undefined"]) == {"precision", "recall", "f1"}
+
+
+def test_progress_bar_names_stages_without_a_count_of_nothing(capsys):
+    """Issue 43 item 20: "building the map: 0frame" was printed twice; the loop search
+    ("ours") had no progress at all. A stage of unknown size shows its name once; the loop
+    search counts its tiles."""
+    from engine.cli import _Bar
+    from engine.loops.paper import OURS_STAGE
+
+    bar = _Bar(quiet=False)
+    bar(0, 0, "building the map")
+    bar(0, 0, "building the map")
+    for done in range(5):
+        bar(done, 4, OURS_STAGE)
+    bar.close()
+    err = capsys.readouterr().err
+    assert "0frame" not in err and "frame" not in err
+    assert err.count("building the map") == 1
+    assert "4/4" in err and "tile" in err
