@@ -14,7 +14,8 @@ The contract:
   is described once.
 * Each .npz is the recording's output and its checkpoint. It is written atomically
   (``engine.outputs.write_atomically``: a temporary file renamed into place), so a killed run
-  never leaves a half file. "Already done" (``is_done``) means: the file exists, loads, and its
+  never leaves a half file under the final name; the temporary file a killed writer left
+  (``.<name>.npz.<random>.tmp``) is removed when the recording is described again. "Already done" (``is_done``) means: the file exists, loads, and its
   meta ``batch.key`` equals the key of this run for this recording (``done_key``: the recording's
   identity, absolute path, size and mtime, for a folder its files too; every describe setting:
   descriptor, interval, topic, shift, options, skip-bad-frames; the versions of the column,
@@ -246,6 +247,16 @@ def _current_worker():
         return None
 
 
+def _remove_leftovers(output: Path) -> None:
+    """Remove the temporary files a killed writer of ``output`` left (``write_atomically``'s
+    ``.<name>.<random>.tmp``); called under the output's lock, so no live writer owns them."""
+    for stale in output.parent.glob(f".{output.name}.*.tmp"):
+        try:
+            stale.unlink()
+        except OSError:
+            pass
+
+
 def describe_one(path: str, output: str, settings: dict, topic: Optional[str] = None,
                  run: str = "") -> dict:
     """Describe the recording at ``path`` into ``output`` unless it is already done; the
@@ -274,6 +285,7 @@ def describe_one(path: str, output: str, settings: dict, topic: Optional[str] = 
         key = done_key(path, described)
         if is_done(output, key, full=True):
             return {"status": "done", "descriptors": 0, "seconds": 0.0, "worker": address}
+        _remove_leftovers(Path(output))
         progress = _EventProgress(worker, topic, output)
         start = time.perf_counter()
         descs = describe(path, described, progress=progress, cache=None)

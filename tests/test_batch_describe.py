@@ -104,6 +104,8 @@ def resumed(recordings, tmp_path_factory) -> dict:
     finally:
         kill_group(first)                      # whatever was left of the first run
     before = finished(out)
+    for rec in recordings:   # what a writer killed in the middle of its rename would leave
+        (out / f".{rec.name}.npz.k1ll3d.tmp").write_bytes(b"half")
     second = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=600)
     return {"out": out, "before": before, "second": second, "recordings": recordings}
 
@@ -121,6 +123,8 @@ def test_a_killed_batch_finishes_the_rest_without_describing_anything_twice(resu
     done = [Path(line.split()[2]).name for line in lines if line.startswith("already done: ")]
     assert sorted(described) == sorted(names - set(before))   # each missing one once, nothing twice
     assert sorted(done) == sorted(before)
+    leftovers = {p.name for p in out.glob(".*.tmp")}
+    assert leftovers == {f".{n}.k1ll3d.tmp" for n in before}   # removed where described again
     first_runs = {run_id(out / n) for n in before}
     second_runs = {run_id(out / n) for n in names - set(before)}
     assert len(first_runs) == 1 and len(second_runs) == 1 and first_runs != second_runs
