@@ -176,7 +176,6 @@ MAP = [
     (["bool.npz"], "true/false"),
     (["dup_frames.npz"], "frame 5 is described twice"),
     (["backwards.npz"], "stamps run backwards at row 6"),
-    (["colours_width.npz"], "'colours' must be 12 x 512"),
     (["zero_row.npz"], "row 4 is all zeros"),
     (["good.npz", "--poses", "huge.csv"], "metres"),
     (["good.npz", "--poses", "ns.csv"], "seconds"),
@@ -231,6 +230,15 @@ EVAL = [
 @pytest.mark.parametrize("args, word", EVAL, ids=[" ".join(a) for a, _ in EVAL])
 def test_eval(data, args, word):
     assert_one_line(run(data, "eval", *args), word)
+
+
+def test_colours_of_the_wrong_width_are_ignored_with_one_line(data):
+    """No method reads colours now: a file with colours panotopo cannot have written maps
+    without them, and says so (issue 43 item 18 asked for a line instead of silence)."""
+    proc = run(data, "map", "colours_width.npz", "-o", "out_colours.graphml", "--method", "shift-simple", "-q")
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "ignored its 'colours'" in lines[0], proc.stderr
 
 
 def test_eval_poses_on_another_clock(data, tmp_path):

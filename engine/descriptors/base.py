@@ -116,8 +116,11 @@ class Descriptors:
         if d.columns is not None and (d.columns.ndim != 3 or d.columns.shape[0] != n):
             raise InputError(f"{path}: descriptors file has column signatures of the wrong shape")
         if d.colours is not None and (d.colours.ndim != 2 or d.colours.shape != (n, COLOUR_BINS)):
-            raise InputError(f"{path}: 'colours' must be {n} x {COLOUR_BINS} colour histograms, "
-                             f"got shape {' x '.join(map(str, d.colours.shape))}")
+            # No map method reads colours any more (the retired verified-rules did): a file
+            # whose colours panotopo could not have written still maps, without them.
+            d.notes.append(f"{path}: ignored its 'colours' (shape {' x '.join(map(str, d.colours.shape))}, "
+                           f"not {n} x {COLOUR_BINS}); no map method reads them")
+            d.colours = None
         check_contents(d, path)
         d.notes.extend(_unit_rows(d, path, integer=raw["descriptors"].dtype.kind in "iu"))
         return d
