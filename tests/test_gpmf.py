@@ -135,3 +135,57 @@ def test_panotopo_map_of_a_gopro_clip_puts_gps_positions_on_nodes(gopro_clip, tm
     assert all("x" in d and "y" in d for _, d in nodes)
     ys = [d["y"] for _, d in nodes]
     assert ys == sorted(ys) and ys[-1] > ys[0]               # the walk goes north
+
+
+@pytest.fixture(scope="module")
+def turning_clips(tmp_path_factory) -> dict:
+    """GoPro-style clips of a camera turning 56.25 degrees a second (the panorama rolled 8 of
+    512 columns a frame at 10 fps), with CORI tracks that say so (either sign: which way the
+    camera's z axis points is not known) or say something else."""
+    d = tmp_path_factory.mktemp("turning")
+    rate = clips.ROLL * 360.0 / clips.W * clips.FPS
+    gps = walk_north(40)
+    return {name: clips.write_gopro_360(d / f"{name}.360", frames=40, gps=gps, cori_yaw_deg_per_s=r)
+            for name, r in (("plus", rate), ("minus", -rate), ("wrong", 2.7 * rate), ("still", 0.0))}
+
+
+def test_cori_headings_are_used_when_the_pictures_agree_whatever_the_sign(turning_clips):
+    from engine.shift import apply_shift, shift_from_heading
+    from engine.sources import open_recording
+
+    truth = None
+    for name in ("plus", "minus"):
+        with open_recording(turning_clips[name]) as src:
+            h = src.headings()
+            assert h is not None and h.shape == (src.frame_count,), src.heading_note
+            assert "agree" in src.heading_note
+            # the camera turned counter-clockwise: its clockwise heading falls 5.625 degrees a frame
+            assert np.allclose(np.diff(np.unwrap(np.radians(h))), -np.radians(5.625), atol=np.radians(0.2))
+            truth = h if truth is None else truth
+            assert np.allclose(h, truth, atol=0.2)
+            # every frame turned by its heading shows the same picture
+            frames = [src.frame_at(k).rgb for k in (0, 13, 27)]
+            shifted = [apply_shift(f, shift_from_heading(f.shape[1], h[k])) for f, k in zip(frames, (0, 13, 27))]
+            assert all(np.abs(s.astype(int) - shifted[0]).mean() < 12 for s in shifted[1:])
+
+
+@pytest.mark.parametrize("name", ["wrong", "still"])
+def test_a_cori_track_the_pictures_do_not_confirm_is_not_used(turning_clips, name):
+    from engine.sources import open_recording
+
+    with open_recording(turning_clips[name]) as src:
+        assert src.headings() is None
+        assert "CORI" in src.heading_note
+
+
+def test_describe_shifts_a_gopro_clip_by_its_checked_heading(turning_clips):
+    from engine.pipeline import DescribeSettings, describe
+    from engine.shift import shift_from_heading
+    from engine.sources import open_recording
+
+    descs = describe(turning_clips["plus"], DescribeSettings(interval=0.5, options={"input_height": 32}))
+    assert descs.meta["shift_from"] == "heading"
+    with open_recording(turning_clips["plus"]) as src:
+        h = src.headings()
+    expected = [shift_from_heading(clips.W, h[i]) for i in descs.frames]
+    assert np.all(np.abs((descs.shifts - expected + clips.W // 2) % clips.W - clips.W // 2) <= 1)

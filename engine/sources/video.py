@@ -270,6 +270,17 @@ class VideoSource(FrameSource):
         finally:
             cap.release()
 
+    def headings(self) -> Optional[np.ndarray]:
+        """The camera's own heading per frame (a GoPro's CORI track), where the pictures agree
+        with it (``engine.sources.camera_heading``); None otherwise. Read once."""
+        if getattr(self, "_headings", None) is None:
+            from .camera_heading import checked_headings
+
+            headings, note = checked_headings(self, self.path)
+            self._headings = (headings,)
+            self.heading_note = note
+        return self._headings[0]
+
     def _frames_known(self, interval: float) -> Iterator[Frame]:
         """Single pass when the stamps are already known."""
         wanted = set(int(i) for i in self.sample_indices(interval))

@@ -77,3 +77,15 @@ class Video360Source(FrameSource):
 
     def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
         yield from self.sampler.frames(interval, max_width=max_width)
+
+    def headings(self) -> Optional[np.ndarray]:
+        """The camera's own heading per frame (a GoPro's CORI track), where the pictures agree
+        with it (``engine.sources.camera_heading``); None otherwise. Read once."""
+        if getattr(self, "_headings", None) is None:
+            from .camera_heading import checked_headings
+
+            headings, note = checked_headings(self, self.path)
+            self._headings = (headings,)
+            self.heading_note = note
+        return self._headings[0]
+
