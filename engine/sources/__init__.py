@@ -137,11 +137,11 @@ def recording_poses(path: Path, interval: float = 1.0) -> tuple[Optional[Poses],
 
 
 def recording_headings(path: Path, stamps) -> Optional["np.ndarray"]:
-    """The camera's own heading (radians, relative to its orientation at the start) at
-    ``stamps`` (seconds on the recording's clock): the GPMF CORI track of a GoPro video; None
-    for recordings without one. The hook for a panorama shift from the camera's heading
-    (``engine.shift``): rolling each frame by ``-heading / (2 pi) * width`` columns turns it
-    to the start orientation."""
+    """The camera's own yaw (radians about its z axis, relative to its orientation at the
+    start) at ``stamps`` (seconds on the recording's clock): the raw GPMF CORI track of a
+    GoPro video; None for recordings without one. The panorama shift does not read this:
+    it uses ``FrameSource.headings()``, which for videos gives this track only where the
+    pictures confirm it and its sign (``camera_heading.checked_headings``)."""
     path = Path(path)
     if not (path.is_file() and path.suffix.lower() in VIDEO_SUFFIXES):
         return None

@@ -65,6 +65,13 @@ class ProjectedSource(FrameSource):
     def expected_samples(self, interval: float = 1.0) -> int:
         return self.inner.expected_samples(interval)
 
+    def headings(self) -> Optional[np.ndarray]:
+        """The reader's headings (e.g. a bag's odometry): the panorama turns with the camera,
+        and a fixed offset between the image centre and the robot's front does not matter."""
+        headings = self.inner.headings()
+        self.heading_note = getattr(self.inner, "heading_note", "")
+        return headings
+
     def frame_at(self, index: int) -> Frame:
         return self._convert(self.inner.frame_at(index), None)
 
