@@ -24,6 +24,7 @@ top-level ``tests`` package, ``py-gpmf-parser`` is a C++ build; this reader need
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,7 +157,19 @@ def payload_samples(payload: bytes, t0: float, duration: float, out: dict) -> No
 
 def read_telemetry(path: Path) -> Optional[Telemetry]:
     """The GPMF track of the video at ``path`` (the data stream tagged ``gpmd`` or named
-    "GoPro MET"); None when it has none. InputError when the track is malformed."""
+    "GoPro MET"); None when it has none. InputError when the track is malformed. Read once
+    per file version (positions, headings and the shift all ask; the result is cached on the
+    path, size and modification time)."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        return None
+    return _read_telemetry(str(p.resolve()), st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=8)
+def _read_telemetry(path: str, size: int, mtime_ns: int) -> Optional[Telemetry]:
     import av
     import av.error
 
