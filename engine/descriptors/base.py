@@ -7,8 +7,14 @@ Added key (optional): ``columns`` float16 (n, W', F), per-column signatures of t
 shifted frames for yaw-aligned verification (``engine.verify``). Files without it
 still load (``columns`` is then None).
 Added key (optional): ``colours`` float16 (n, 512), the colour histogram of each frame's
-horizon band (``engine.colour``), evidence of the ``verified`` method for revisits with a
-lateral offset. Files without it still load (``colours`` is then None).
+horizon band (``engine.colour``), evidence of the retired ``verified-rules`` method for
+revisits with a lateral offset; no map method reads it now. Files without it still load
+(``colours`` is then None); colours of another shape are dropped with a note.
+
+Loading checks what a file from anywhere may hold (``engine.npz_guard`` and ``load``): real
+numbers only (complex, boolean or text arrays are refused, never cast), one row per frame,
+stamps that never run backwards, no all-zero descriptor row; descriptor rows not of unit
+length (integer descriptors, another tool's output) are normalised, and ``notes`` says so.
 Added keys (optional, together): ``feat_offsets`` int64 (n + 1,), ``feat_uv`` float16 (N, 2),
 ``feat_desc`` uint8 (N, 128): the local features of every shifted frame
 (``engine.features.FeatureTable``; frame i owns rows ``feat_offsets[i]:feat_offsets[i + 1]``,
