@@ -68,7 +68,7 @@ def make_screenshots(out_dir: str, route: str = "demo", method: str = "verified"
         w.decide("rejected")
     if ev is not None and ev.fn_pairs:
         i, j = ev.fn_pairs[len(ev.fn_pairs) // 2]
-        w.add_manual_loop(w._key_of_nodes(i, j))
+        w.add_manual_loop(w.doc.key_of_nodes(i, j))
     frames = w.doc.node_frames()
     if frames.size > 10:
         w.set_label(int(frames[0]), "start")

@@ -307,3 +307,32 @@ def test_undo_of_a_manual_loop_and_a_name_after_the_nodes_moved():
     doc.history.undo()
     doc.history.undo()
     assert doc.loop_rows() == [] and doc.label_of_frame(53) == ""
+
+
+def _descs(shift: bool = True):
+    import numpy as np
+
+    from engine.descriptors.base import Descriptors
+
+    n = 12
+    v = np.eye(n, 16, dtype=np.float32)
+    return Descriptors(stamps=np.arange(n, dtype=np.float64), frames=np.arange(n, dtype=np.int64),
+                       shifts=np.zeros(n, np.int64), vectors=v,
+                       meta={"descriptor": "other-model", "interval": 1.0, "shift": shift})
+
+
+def test_the_describe_or_remap_decision_is_made_in_the_model():
+    """Issue 41, item 6: the window decided describe-or-remap itself; gui.model.run_plan does."""
+    from engine.params import MapParams
+    from engine.pipeline import DescribeSettings
+    from gui.model import run_plan
+
+    shifted, plain = _descs(True), _descs(False)
+    ours, simple = MapParams(method="ours"), MapParams(method="simple")
+    settings = DescribeSettings(descriptor="other-model")
+    assert run_plan.plan_change(ours, None, settings, False, False).action == run_plan.WAIT
+    assert run_plan.plan_change(ours, shifted, settings, False, True).action == run_plan.WAIT
+    assert run_plan.plan_change(ours, shifted, settings, False, False).action == run_plan.REMAP
+    assert run_plan.plan_change(simple, shifted, settings, False, False).action == run_plan.DESCRIBE
+    refused = run_plan.plan_change(ours, plain, settings, True, False)
+    assert refused.action == run_plan.REFUSE and "shifted" in refused.message

@@ -115,7 +115,7 @@ def test_parameters_do_not_carry_over_to_the_next_recording(qtbot, make_window, 
     start = w.doc.params
     open_and_run(qtbot, w, first)
     changed = replace(w.doc.params, retrieval_k=32, auto_z=5.5)
-    w._params_edited("retrieval_k", changed)
+    w.runs._params_edited("retrieval_k", changed)
     assert w.doc.params.retrieval_k == 32
     monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.Discard)
     open_and_run(qtbot, w, second)

@@ -208,7 +208,7 @@ def test_verified_shows_the_node_threshold_it_calibrated(qtbot, make_window, rec
     open_and_run(qtbot, w, copy_recording(recording, tmp_path))
     assert w.doc.params.node_sim_th is None              # left unset: calibrated per recording
     used = w.doc.topomap.meta["node_sim_th"]
-    assert used != pytest.approx(w._defaults["node_sim_th"], abs=1e-3)
+    assert used != pytest.approx(w.runs._defaults["node_sim_th"], abs=1e-3)
     assert w.params_panel.node_sim_th.value() == pytest.approx(used, abs=1e-3)
     with qtbot.waitSignal(w.mapReady, timeout=5000):   # another parameter: still the calibrated value
         w.params_panel.neighbor_node_num.setValue(w.params_panel.neighbor_node_num.value() + 1)
@@ -581,7 +581,7 @@ def test_graph_loop_click_and_ctrl_click_manual_loop(qtbot, make_window, recordi
     first, second = 1, n - 2
     qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, pos=gv.node_screen_pos(first))
     assert gv.current_node == first
-    key = w._key_of_nodes(first, second)
+    key = w.doc.key_of_nodes(first, second)
     dialogs.answers.append(QMessageBox.No)   # Ctrl+click asks first (issue 14, defect 10): No adds nothing
     qtbot.mouseClick(gv.plot.viewport(), Qt.LeftButton, Qt.ControlModifier, pos=gv.node_screen_pos(second))
     assert key not in statuses(w)

@@ -529,11 +529,4 @@ def _number(value) -> Optional[float]:
     return None if math.isnan(f) else f
 
 
-def needs_remap(built_with: MapParams, wanted: MapParams) -> bool:
-    """A run finished with parameters the user has changed meanwhile: build the map again?
-
-    Only the map step needs repeating when the descriptors still fit (the same describe
-    needs: panorama shift and the method's describe options, ``MapParams.describe_needs``);
-    a method that needs other descriptors starts a new describe run instead.
-    """
-    return built_with != wanted and built_with.describe_needs == wanted.describe_needs
+from .run_plan import needs_remap  # noqa: E402,F401  (declared once, in run_plan)
