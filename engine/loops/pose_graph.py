@@ -29,6 +29,11 @@ from .pairs import Steps
 # A turn or position this uncertain says nothing (a weak factor): the chain stays joined.
 _FREE_TURN = 1e3
 _FREE_STEP = 1e3
+# Solver effort per graduated step: each starts from the last solution, which is close, so a
+# looser tolerance and fewer iterations than GTSAM's defaults (1e-5, 100) suffice; with the
+# defaults Levenberg-Marquardt took 45 iterations per solve (20,000 nodes, 800 loops: 23 s).
+_BASE_ITERATIONS = 15
+_RELATIVE_TOL = 1e-3
 
 
 @dataclass
@@ -171,7 +176,10 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
         loop_factors.append(add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(0.0, 0.0, turn), noise), False))
 
     if loop_factors or robust_steps:
-        gnc = gtsam.GncLMParams()
+        base = gtsam.LevenbergMarquardtParams()
+        base.setMaxIterations(_BASE_ITERATIONS)
+        base.setRelativeErrorTol(_RELATIVE_TOL)
+        gnc = gtsam.GncLMParams(base)
         gnc.setKnownInliers(inliers)
         optimizer = gtsam.GncLMOptimizer(graph, initial, gnc)
         optimizer.setInlierCostThresholdsAtProbability(params.graph_inlier_probability)
