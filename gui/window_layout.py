@@ -18,6 +18,8 @@ from PySide6.QtCore import QRect, Qt
 LEFT_SHARE = 0.36
 # Height of the frame viewer's texts and controls beyond its two panoramas (pixels).
 VIEWER_EXTRA = 122
+# Height the graph needs at least beside the node panel; less, and the panel becomes a tab.
+GRAPH_MIN = 260
 # Height kept for the node panel under the graph (pixels).
 NODE_PANEL_MIN = 150
 # Height of the pair view's title, evidence, caption and buttons beyond its panoramas (pixels).
@@ -43,10 +45,15 @@ def split_views(window) -> None:
         window.resizeDocks(list(docks), [sum(d.height() for d in docks) - evaluation, evaluation], Qt.Vertical)
     column = window.left_splitter.height()
     viewer = min(left // 2 + VIEWER_EXTRA, max(column // 2, 0))
-    node = NODE_PANEL_MIN
+    node = max(NODE_PANEL_MIN, window.node_panel.minimumSizeHint().height())
+    if column - viewer - node < GRAPH_MIN and window.node_panel.parent() is not window.tabs:
+        # A short screen (1280x720): the node panel becomes a tab beside the graph, which
+        # would otherwise be a strip a few pixels high.
+        window.tabs.addTab(window.node_panel, "Current node")
+        node = 0
     graph = column - viewer - node
-    if graph > 120:
-        window.left_splitter.setSizes([viewer, graph, node])
+    sizes = [viewer, graph, node] if window.left_splitter.count() == 3 else [viewer, graph]
+    window.left_splitter.setSizes(sizes)
 
 
 # Room a window manager takes around a window: its frame, its title bar (pixels).

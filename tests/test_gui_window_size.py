@@ -139,3 +139,19 @@ def test_the_first_size_fits_a_1280x720_screen_and_a_saved_bigger_one_is_clamped
     assert big["w"] > 1500
     again = _first_size(tmp_path, (1280, 720))               # ... reopened on a small one
     assert again["x"] + again["w"] <= 1280 and again["y"] + again["h"] <= 720, again
+
+
+def test_at_1280x720_the_graph_is_not_a_strip(qtbot, tmp_path):
+    """With the queue and the pair view in the right column, the left column holds the frame
+    viewer, the graph and the node panel: on a short screen the node panel becomes a tab."""
+    from gui.main_window import MainWindow
+
+    w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), interactive=False)
+    qtbot.addWidget(w)
+    w.resize(1280, 720)
+    w.show()
+    qtbot.waitExposed(w)
+    qtbot.waitUntil(lambda: getattr(w, "_split_done", False), timeout=2000)
+    qtbot.wait(50)
+    assert w.graph_view.height() >= 200 and w.graph_view.width() >= 280
+    w.close()
