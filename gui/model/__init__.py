@@ -10,7 +10,12 @@ tests/test_layers.py), so the model is tested in plain Python (tests/test_app_mo
 * ``commands``: the decisions as commands (status, manual loops, labels).
 * ``queue``: the review queue (``ReviewQueue``): ranking, filters, counts, bulk actions.
 * ``keys``: the one table of keyboard shortcuts.
-* ``journal``: decision records (what the write-through journal stores) and their replay.
+* ``journal``: decision records (what the write-through journal stores), checked, and their replay.
+* ``recording_files``: the session, autosave and journal beside a recording: which saved
+  session belongs to a file, unsaved work restored or dropped, files written only as ours.
+* ``run_plan``: what a parameter change asks for (describe again, re-map, refuse, wait) and
+  which thresholds are known before the map is built.
+* ``layout``: the drawing of the map as decided (no ground truth), from a copy of it.
 * ``similarity``: the node similarity matrix with a picture-sized preview.
 * ``loop_key``: loops addressed by the source frames of their two nodes.
 """
