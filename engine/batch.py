@@ -19,7 +19,7 @@ The contract:
   meta ``batch.key`` equals the key of this run for this recording (``done_key``: the recording's
   identity, absolute path, size and mtime, for a folder its files too; every describe setting:
   descriptor, interval, topic, shift, options, skip-bad-frames; the versions of the column,
-  colour and feature signatures). Anything else is described again, over the old file.
+  feature signatures). Anything else is described again, over the old file.
   A file written by the single-process ``describe`` carries no key, so a batch describes it again.
 * A worker takes a Dask lock named after the output while it checks and describes, so two runs
   against one cluster (a client killed while its task runs on, and its rerun) never describe one
@@ -140,7 +140,6 @@ def _plain_settings(settings) -> dict:
 def done_key(path: str | Path, settings) -> Optional[str]:
     """The key a finished .npz of recording ``path`` under ``settings`` carries; None when
     ``path`` cannot be read here (then only a worker can tell)."""
-    from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
     from .features import FEATURES_VERSION
     from .verify import COLUMNS_VERSION
@@ -148,7 +147,7 @@ def done_key(path: str | Path, settings) -> Optional[str]:
     plain = _plain_settings(settings)
     try:
         return cache_key(path, {"interval": plain.get("interval"), "topic": plain.get("topic")},
-                         {"describe": plain, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
+                         {"describe": plain, "columns": COLUMNS_VERSION,
                           "features": FEATURES_VERSION})
     except OSError:
         return None

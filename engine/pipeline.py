@@ -96,7 +96,6 @@ def describe(
     A descriptors .npz written by ``describe`` is loaded as it is. With ``cache``
     given, a previous result for the same file and settings is reused.
     """
-    from .colour import COLOURS_VERSION
     from .descriptors.cache import cache_key
     from .features import FEATURES_VERSION
     from .verify import COLUMNS_VERSION
@@ -121,7 +120,7 @@ def describe(
         if settings.shift and (path.is_dir() or path.suffix.lower() in (".bag", ".db3", ".mcap")):
             reading["headings"] = 1   # bags and photo folders may now be shifted by their headings
         key = cache_key(path, reading,
-                        {"shift": settings.shift, "columns": COLUMNS_VERSION, "colours": COLOURS_VERSION,
+                        {"shift": settings.shift, "columns": COLUMNS_VERSION,
                          "features": FEATURES_VERSION, "work_width": work_width(model), **model.settings()})
         hit = cache.load(key)
         if hit is not None:
@@ -190,10 +189,8 @@ def describe_frames(
 
     Besides the global vectors it keeps per-column signatures of every shifted frame
     (``Descriptors.columns``), which the ``verified`` method uses for yaw-aligned checks,
-    and a colour histogram of each frame (``Descriptors.colours``) for revisits with an offset,
     and the local features of each shifted frame (``Descriptors.features``) for two-view geometry.
     """
-    from .colour import colour_histogram
     from .features import FeatureTable, extract
     from .shift import apply_shift, canonical_shift, shift_from_heading
     from .verify import column_features
@@ -204,7 +201,6 @@ def describe_frames(
     indices: list[int] = []
     shifts: list[int] = []
     columns: list[np.ndarray] = []
-    colours: list[np.ndarray] = []
     features: list = []
     frame_width: list[int] = []
 
@@ -226,7 +222,6 @@ def describe_frames(
             shifts.append(int(round(s_work * frame.width / work.shape[1])) % frame.width)
             rgb = apply_shift(work, s_work) if s_work else work
             columns.append(column_features(rgb))
-            colours.append(colour_histogram(rgb))
             features.append(extract(rgb))
             if not frame_width:
                 frame_width.append(frame.width)
@@ -252,7 +247,6 @@ def describe_frames(
         vectors=np.asarray(vectors, np.float32),
         meta=meta,
         columns=np.stack(columns).astype(np.float16) if columns else None,
-        colours=np.stack(colours).astype(np.float16) if colours else None,
         features=FeatureTable.from_list(features) if features else None,
     )
 
@@ -260,10 +254,10 @@ def describe_frames(
 # Every per-frame step of describing works on frames at most this wide, or as wide as the
 # descriptor's network input where that is wider (``work_width``): the default inputs are
 # 256 (effnet-vlad), 448 (AnyLoc) and 644 columns (MegaLoc/BoQ at 322x644), local features
-# use 256 columns, column signatures 512, colour histograms fewer. A 3840x1920 frame cost
+# use 256 columns, column signatures 512. A 3840x1920 frame cost
 # 0.35-0.6 s in those steps at full size (mostly resizing and rolling 22 MB); at 2,048
 # columns 88 ms, at 1,024 columns 36 ms, most of the difference in the descriptor's own
-# resize and the colour histogram (effnet-vlad 46 -> 18 ms, colours 11 -> 2 ms per frame,
+# resize and the (since retired) colour histogram (effnet-vlad 46 -> 18 ms per frame,
 # timed one frame at a time on the 2-core development machine, see
 # benchmarks/results/video_sampling.md). Area averaging to 1,024 and then to 256 columns
 # gives the network nearly the same picture as averaging from 2,048.

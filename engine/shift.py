@@ -54,7 +54,7 @@ YAW_BANDS = 8
 
 
 def check_rgb(rgb: np.ndarray) -> None:
-    """Raise InputError unless ``rgb`` is an H x W x 3 image (shared with ``engine.colour``)."""
+    """Raise InputError unless ``rgb`` is an H x W x 3 image."""
     if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[1] < 2:
         shape = getattr(rgb, "shape", None)
         raise InputError(f"panorama shift needs an H x W x 3 image, got shape {shape}")

@@ -7,7 +7,7 @@ Added key (optional): ``columns`` float16 (n, W', F), per-column signatures of t
 shifted frames for yaw-aligned verification (``engine.verify``). Files without it
 still load (``columns`` is then None).
 Added key (optional): ``colours`` float16 (n, 512), the colour histogram of each frame's
-horizon band (``engine.colour``), evidence of the retired ``verified-rules`` method for
+horizon band, evidence of the retired ``verified-rules`` method (no longer computed) for
 revisits with a lateral offset; no map method reads it now. Files without it still load
 (``colours`` is then None); colours of another shape are dropped with a note.
 
@@ -132,7 +132,7 @@ class Descriptors:
         return d
 
 
-# The width of the optional 'colours' arrays: engine.colour's Lab histogram, 8 bins per
+# The width of the optional 'colours' arrays of older files: a Lab histogram, 8 bins per
 # channel (the .npz contract's (n, 512)).
 COLOUR_BINS = 512
 # A row is taken as L2-normalised when its length is within this of 1: float16 caches and
