@@ -443,6 +443,25 @@ def make_people(walk_lines: list, count: int, seed: int) -> People:
                   height=rng.uniform(1.55, 1.9, count), colours=colours)
 
 
+LIGHT_ANGLE = 0.8    # radians from +x: where the light comes from (the sun outdoors)
+
+
+def wall_shade(seg_a: np.ndarray, seg_b: np.ndarray, look: str,
+               light_angle: float = LIGHT_ANGLE) -> np.ndarray:
+    """Per-wall brightness (S,): walls facing the light at ``light_angle`` are brighter.
+
+    ``build_world`` uses the default angle; another day of the same world
+    (``engine.synth.sessions``) turns the light to relight the same walls."""
+    lengths = np.hypot(*(seg_b - seg_a).T)
+    d = seg_b - seg_a
+    normal = np.stack([d[:, 1], -d[:, 0]], 1) / lengths[:, None]   # points into free space
+    light = np.array([np.cos(light_angle), np.sin(light_angle)])
+    facing = normal @ light
+    if look == "indoor":
+        return 0.88 + 0.12 * facing
+    return 0.72 + 0.28 * np.clip(facing, 0, 1) + 0.05 * facing
+
+
 def build_world(corridors: list[Corridor], look: str, seed: int, *,
                 people: int = 0, lighting_drift: float = 0.0, noise: float = 0.0) -> World:
     """The world whose free space is the union of ``corridors`` (deterministic from ``seed``)."""
@@ -484,12 +503,7 @@ def build_world(corridors: list[Corridor], look: str, seed: int, *,
         pos += tex.shape[1] + 1
     atlas = _mip(_to_u8(np.concatenate(columns, axis=1)), wrap=False)
 
-    # Per-wall brightness: walls facing a fixed light (the sun outdoors) are brighter.
-    d = seg_b - seg_a
-    normal = np.stack([d[:, 1], -d[:, 0]], 1) / lengths[:, None]   # points into free space
-    light = np.array([np.cos(0.8), np.sin(0.8)])
-    facing = normal @ light
-    shade = (0.88 + 0.12 * facing) if indoor else (0.72 + 0.28 * np.clip(facing, 0, 1) + 0.05 * facing)
+    shade = wall_shade(seg_a, seg_b, look)
 
     floor_rho, t = (32.0, 128) if indoor else (24.0, 192)
     tiles = np.stack([_mip(_floor_tile(rng, look, m, t, floor_rho), wrap=True) for m in (0, 1)])
