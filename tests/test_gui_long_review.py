@@ -72,12 +72,15 @@ def test_after_a_bulk_decision_the_current_row_stays_where_the_user_was(qtbot, m
     w = make_window()
     w.doc.replace_map(make_map([dict(a=i, b=i + 30, status="candidate", score=0.9 - 0.05 * i) for i in range(12)], 60))
     view = w.loop_table.view
+    w.activateWindow()
     view.setFocus()
     w.loop_table.select_key(w.loop_table.visible_keys()[0])
     for _ in range(6):
         qtbot.keyClick(view, Qt.Key_Down, Qt.ShiftModifier)
-    assert len(w.loop_table.selected_keys()) == 7
-    qtbot.keyClick(view, Qt.Key_C)
+    chosen = w.loop_table.selected_keys()
+    assert len(chosen) == 7
+    w.action_of_key["confirm"].trigger()        # C
+    assert {r.key: r.status for r in w.doc.loop_rows() if r.key in chosen} == dict.fromkeys(chosen, "confirmed")
     assert view.currentIndex().row() == 6
     qtbot.keyClick(view, Qt.Key_Down)
     qtbot.keyClick(view, Qt.Key_Up)
