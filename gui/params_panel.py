@@ -103,15 +103,10 @@ class ParamsPanel(QWidget):
         self.calibrate_button.setToolTip("simple / shift-simple / ours: set the node and loop thresholds "
                                          "from this recording's own similarities (undoable)")
         self.calibrate_button.clicked.connect(self.calibrateRequested)
-        self.long_runs = QCheckBox("Long runs")
-        self.long_runs.setToolTip("verified-rules: also look for stretches driven twice with a lateral offset "
-                                  "(finds more returns, rarely a false loop)")
 
         self.method.currentIndexChanged.connect(lambda _: self._edited("method"))
         for name in ("node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"):
             getattr(self, name).valueChanged.connect(lambda _, n=name: self._edited(n))
-        if "long_runs" in MapParams.__dataclass_fields__:   # verified-rules' only parameter (being retired)
-            self.long_runs.toggled.connect(lambda _: self._edited("long_runs"))
 
         describe_box = QGroupBox("Descriptors")
         form = QFormLayout(describe_box)
@@ -131,7 +126,6 @@ class ParamsPanel(QWidget):
         form.addRow("Window size", self.window_size)
         form.addRow("Count threshold", self.count_th)
         form.addRow("Neighbour nodes", self.neighbor_node_num)
-        form.addRow("", self.long_runs)
         form.addRow("", self.calibrate_button)
         self._build_evidence()
 
@@ -211,7 +205,6 @@ class ParamsPanel(QWidget):
             self.window_size.setValue(int(shown.window_size))
             self.count_th.setValue(int(shown.count_th))
             self.neighbor_node_num.setValue(int(shown.neighbor_node_num))
-            self.long_runs.setChecked(bool(getattr(shown, "long_runs", False)))  # gone with verified-rules
             self._show_evidence(shown)
         finally:
             self._updating = False
@@ -322,7 +315,6 @@ PARAMS_USED = {
     "shift-simple": {"node_sim_th", "loop_sim_th"},
     "ours": {"node_sim_th", "loop_sim_th", "window_size", "count_th", "neighbor_node_num"},
     "verified": {"node_sim_th", "neighbor_node_num"},
-    "verified-rules": {"node_sim_th", "neighbor_node_num", "long_runs"},
 }
 # Parameters with a widget made by hand above; the panel generates one for every other.
 HAND_MADE = {"method"}.union(*PARAMS_USED.values())
@@ -421,8 +413,8 @@ def _widget_for(p: Parameter) -> QWidget:
         step = float_step(p, lo, hi)
         w = _double(lo, hi, step, "")
         decimals = max(2, 1 - math.floor(math.log10(step)))
-        while p.default is not None and round(float(p.default), decimals) != p.default and decimals < 6:
-            decimals += 1   # the default shown exactly
+        while decimals < 6 and any(v is not None and round(float(v), decimals) != v for v in (p.default, lo, hi)):
+            decimals += 1   # the default and the range shown exactly (a minimum of 0.001 is not 0)
         w.setDecimals(decimals)
         w.setRange(lo, hi)   # again: the range is rounded to the decimals in force when it is set
     if p.type is not bool and p.default is not None:

@@ -4,10 +4,9 @@ import pytest
 
 
 @pytest.mark.parametrize("method, enabled, disabled", [
-    ("ours", {"loop_sim_th", "window_size", "count_th", "neighbor_node_num"}, {"long_runs"}),
-    ("simple", {"loop_sim_th"}, {"window_size", "count_th", "neighbor_node_num", "long_runs"}),
-    ("verified", {"neighbor_node_num"}, {"loop_sim_th", "window_size", "count_th", "long_runs"}),
-    ("verified-rules", {"neighbor_node_num", "long_runs"}, {"loop_sim_th", "window_size", "count_th"}),
+    ("ours", {"loop_sim_th", "window_size", "count_th", "neighbor_node_num"}, set()),
+    ("simple", {"loop_sim_th"}, {"window_size", "count_th", "neighbor_node_num"}),
+    ("verified", {"neighbor_node_num"}, {"loop_sim_th", "window_size", "count_th"}),
 ])
 def test_parameters_panel_enables_what_the_method_reads(qtbot, method, enabled, disabled):
     from gui.params_panel import ParamsPanel
@@ -17,18 +16,6 @@ def test_parameters_panel_enables_what_the_method_reads(qtbot, method, enabled, 
     panel.method.setCurrentIndex(panel.method.findData(method))
     assert all(getattr(panel, n).isEnabled() for n in enabled)
     assert not any(getattr(panel, n).isEnabled() for n in disabled)
-
-
-def test_long_runs_checkbox_edits_the_parameter(qtbot):
-    from gui.params_panel import ParamsPanel
-
-    panel = ParamsPanel()
-    qtbot.addWidget(panel)
-    assert panel.long_runs.isChecked() and panel.params().long_runs
-    with qtbot.waitSignal(panel.paramsEdited) as sig:
-        panel.long_runs.setChecked(False)
-    assert sig.args[0] == "long_runs" and sig.args[1].long_runs is False
-    assert panel.params().long_runs is False
 
 
 # -- the rows generated from engine.params.PARAMETERS --------------------------------------
@@ -69,14 +56,14 @@ def test_every_parameter_verified_reads_is_an_editable_widget(qtbot):
 
     panel = _panel(qtbot, "verified")
     read = [p.name for p in parameters_for("verified")]
-    assert {"auto_inliers", "auto_geometry_z", "candidate_z", "place_radius", "heading_tol"} <= set(read)
+    assert {"auto_inliers", "auto_geometry_z", "candidate_z", "place_radius"} <= set(read)
     for name in read:
         w = _widget(panel, name)
         assert w.isEnabled() and w.isVisibleTo(panel), name
     assert panel.evidence_box.isVisibleTo(panel) and "verified" in panel.evidence_box.title()
 
 
-@pytest.mark.parametrize("method", ["simple", "shift-simple", "ours", "verified", "verified-rules"])
+@pytest.mark.parametrize("method", ["simple", "shift-simple", "ours", "verified"])
 def test_generated_rows_are_offered_only_to_the_methods_that_read_them(qtbot, method):
     from engine.params import BY_NAME
 
