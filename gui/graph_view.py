@@ -18,7 +18,7 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
-from .background import LatestOnly
+from .background import Worker
 from .model.layout import decided_graph, path_layout, solve_layout
 from .loop_arcs import distance_to_curves, loop_curves, nan_joined
 from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
@@ -105,7 +105,7 @@ class GraphView(QWidget):
 
         # Without ground truth the map as decided is drawn, solved again after each decision
         # (issue 43, defect 2), off the UI thread from a copy of the decided graph.
-        self.layout_worker = LatestOnly(self)
+        self.layout_worker = Worker(self)
         self._layout: Optional[tuple[object, np.ndarray, np.ndarray]] = None  # (map, x, y) solved since
         doc.mapReplaced.connect(self.rebuild)
         doc.posesChanged.connect(self.rebuild)
