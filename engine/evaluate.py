@@ -29,6 +29,14 @@ time gives a diagonal run of pairs). An event is found when any TP falls in it.
 
 Node positions: from ``poses`` at the node stamps when poses are given, else from
 the nodes' own ``x``/``y`` attributes.
+
+Several recordings (a site map: nodes carry ``session``): ``poses`` is a dict session ->
+Poses (each recording's ground truth on its own clock, all in one world frame). Nodes of
+different recordings are never temporal neighbours and never joined by a path arc, so every
+pair across recordings counts (pairs = all pairs less the path arcs); the counts across
+recordings are also given apart (``cross_tp``, ``cross_fp``, ``cross_fn`` and the revisit
+events with a pair across recordings, ``cross_events_found`` / ``cross_events_total``); the
+within-recording figures are the totals less these.
 """
 
 from __future__ import annotations
@@ -83,6 +91,13 @@ class Evaluation:
     # ... and how long the robot was away: the most nodes along the path between the two
     # nodes of one of its same-place pairs (a tight turn comes back within a few nodes).
     event_span: list[int] = field(default_factory=list)
+    # Several recordings (a site map): the pairs and events across recordings, apart.
+    cross_tp: int = 0
+    cross_fp: int = 0
+    cross_fn: int = 0
+    cross_events_found: int = 0
+    cross_events_total: int = 0
+    sessions: int = 1
 
     def undefined(self) -> tuple[str, ...]:
         """The ratios with a zero denominator (no detections: precision; no positives: recall).
@@ -115,7 +130,11 @@ class Evaluation:
         return d
 
 
-def node_positions(topomap: TopoMap, poses: Optional[Poses]) -> tuple[np.ndarray, np.ndarray]:
+def node_positions(topomap: TopoMap, poses) -> tuple[np.ndarray, np.ndarray]:
+    """Node (x, y) from ``poses`` (a Poses, or a dict session -> Poses for a site map) at
+    the node stamps, else from the nodes' own positions."""
+    if isinstance(poses, dict):
+        return _session_positions(topomap, poses)
     if poses is not None:
         if len(poses) == 0:
             raise InputError("the ground-truth poses are empty")
@@ -129,12 +148,46 @@ def node_positions(topomap: TopoMap, poses: Optional[Poses]) -> tuple[np.ndarray
     return pos
 
 
+def _session_positions(topomap: TopoMap, poses: dict) -> tuple[np.ndarray, np.ndarray]:
+    from .validate import poses_cover
+
+    sessions = topomap.node_sessions()
+    if sessions is None:
+        if len(poses) != 1:
+            raise InputError(f"the map is of one recording; give one set of poses, not {len(poses)}")
+        return node_positions(topomap, next(iter(poses.values())))
+    stamps = topomap.stamps()
+    x, y = np.zeros(stamps.size), np.zeros(stamps.size)
+    for name in dict.fromkeys(sessions.tolist()):
+        if name not in poses:
+            raise InputError(f"no ground-truth poses for the recording {name}")
+        mine = sessions == name
+        if len(poses[name]) == 0:
+            raise InputError(f"the ground-truth poses of {name} are empty")
+        poses_cover(poses[name], stamps[mine], f"the ground-truth poses of {name}")
+        x[mine], y[mine] = poses[name].at(stamps[mine])
+    unknown = sorted(set(poses) - set(sessions.tolist()))
+    if unknown:
+        raise InputError(f"poses given for {unknown[0]}, which is not a recording of this map")
+    return x, y
+
+
+def _session_codes(topomap: TopoMap) -> Optional[np.ndarray]:
+    """Each node's recording as an integer (node order), None for a one-recording map."""
+    sessions = topomap.node_sessions()
+    if sessions is None:
+        return None
+    return np.unique(sessions.astype(str), return_inverse=True)[1].astype(np.int64)
+
+
 def _ratio(num: int, den: int) -> float:
     return num / den if den else 0.0
 
 
-def _positive_pairs(x: np.ndarray, y: np.ndarray, dist_th: float, nn: int) -> tuple[np.ndarray, np.ndarray]:
-    """Same-place pairs (i, j) with j - i > max(nn, 1), sorted by (i, j); blocked over rows."""
+def _positive_pairs(x: np.ndarray, y: np.ndarray, dist_th: float, nn: int,
+                    codes: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+    """Same-place pairs (i, j) with j - i > max(nn, 1), or j > i in another recording
+    (``codes``), sorted by (i, j); blocked over rows."""
     m = x.size
     gap = max(nn, 1)
     rows = max(1, _BLOCK_ELEMENTS // max(m, 1))
@@ -144,7 +197,10 @@ def _positive_pairs(x: np.ndarray, y: np.ndarray, dist_th: float, nn: int) -> tu
         i1 = min(m, i0 + rows)
         d2 = (x[i0:i1, None] - x[None, :]) ** 2 + (y[i0:i1, None] - y[None, :]) ** 2
         ii = np.arange(i0, i1)[:, None]
-        r, c = np.nonzero(_within(d2, dist_th) & (cols[None, :] - ii > gap))
+        apart = cols[None, :] - ii > gap
+        if codes is not None:
+            apart |= (cols[None, :] > ii) & (codes[None, :] != codes[i0:i1, None])
+        r, c = np.nonzero(_within(d2, dist_th) & apart)
         pi.append(r + i0)
         pj.append(c)
     if not pi:
@@ -172,7 +228,7 @@ def _events(pi: np.ndarray, pj: np.ndarray, m: int) -> np.ndarray:
     return connected_components(adj, directed=False)[1].astype(np.int64)
 
 
-def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1.0,
+def evaluate(topomap: TopoMap, poses=None, dist_th: float = 1.0,
              neighbor_node_num: Optional[int] = None, include_candidates: bool = False) -> Evaluation:
     """Count TP/FP/TN/FN of the map's loop arcs against ground truth (see module doc).
 
@@ -185,21 +241,28 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
     if neighbor_node_num is None:
         neighbor_node_num = int(topomap.meta.get("neighbor_node_num", 0))
     nn = int(neighbor_node_num)
+    codes = _session_codes(topomap)
+    if codes is not None and isinstance(poses, Poses) and codes.max() > 0:
+        raise InputError(f"the map has {int(codes.max()) + 1} recordings, each on its own clock: "
+                         f"give one set of poses per recording")
     x, y = (np.asarray(a, dtype=np.float64) for a in node_positions(topomap, poses))
     m = x.size
     index = {n: int(d["index"]) for n, d in topomap.graph.nodes(data=True)}
 
+    def cross(i, j):
+        return codes is not None and codes[i] != codes[j]
+
     # Positive pairs: same place, not temporal neighbours.
-    pi, pj = _positive_pairs(x, y, dist_th, nn)
+    pi, pj = _positive_pairs(x, y, dist_th, nn, codes)
     pos_keys = pi * m + pj
 
     tp_pairs, fp_pairs, loop_truth = [], [], {}
     for u, v, d in topomap.loops():
         i, j = index[u], index[v]
-        if j - i < 2:
+        if j - i < 2 and not cross(i, j):
             continue  # not a pair we count (a path arc)
         same = _within((x[i] - x[j]) ** 2 + (y[i] - y[j]) ** 2, dist_th)
-        positive = bool(same) and j - i > nn
+        positive = bool(same) and (j - i > nn or cross(i, j))
         if d.get("status") == "rejected" or (d.get("status") == "candidate" and not include_candidates):
             loop_truth[(u, v)] = "FN" if positive else "TN"
         elif positive:
@@ -215,6 +278,8 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
 
     tp, fp, fn = len(tp_pairs), len(fp_pairs), len(fn_pairs)
     total = (m - 1) * (m - 2) // 2 if m >= 2 else 0
+    if codes is not None and m >= 2:   # path arcs only within a recording
+        total = m * (m - 1) // 2 - int(np.count_nonzero(codes[1:] == codes[:-1]))
     tn = total - tp - fp - fn
 
     labels = _events(pi, pj, m)
@@ -226,6 +291,14 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
     event_span = np.zeros(event_ids.size, np.int64)
     np.maximum.at(event_span, event_of_pair, (pj - pi).astype(np.int64))
     found, events_total = int(event_found.sum()), int(event_ids.size)
+    across = {}
+    if codes is not None:
+        event_cross = np.zeros(event_ids.size, bool)
+        event_cross[event_of_pair[codes[pi] != codes[pj]]] = True
+        across = dict(cross_tp=sum(cross(i, j) for i, j in tp_pairs), cross_fp=sum(cross(i, j) for i, j in fp_pairs),
+                      cross_fn=sum(cross(i, j) for i, j in fn_pairs),
+                      cross_events_found=int((event_found & event_cross).sum()),
+                      cross_events_total=int(event_cross.sum()), sessions=int(codes.max()) + 1)
 
     return Evaluation(
         tp=tp, fp=fp, tn=tn, fn=fn,
@@ -235,5 +308,5 @@ def evaluate(topomap: TopoMap, poses: Optional[Poses] = None, dist_th: float = 1
         events_found=found, events_total=events_total,
         loop_truth=loop_truth, dist_th=float(dist_th), neighbor_node_num=nn,
         event_closest=event_closest.tolist(), event_found=event_found.tolist(),
-        event_span=event_span.tolist(),
+        event_span=event_span.tolist(), **{k: int(v) for k, v in across.items()},
     )

@@ -29,6 +29,14 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
+
+Several recordings (a site, ``engine.site``): node ``session`` str (the recording's name),
+sequential arcs only between consecutive nodes of one session, graph ``sessions`` (JSON list
+of {"session", "source", "descriptors", "nodes"}: where each recording and its descriptors
+are) and ``decisions`` (JSON of ``decisions()``, so that rejected loops, left out of the
+exported arcs, survive adding a recording). Decisions of a site are keyed by (session, frame):
+a loop item carries ``sessions`` [sa, sb] beside ``frames``, a label ``session``; an item
+without them belongs to the first session (a one-recording map grown into a site).
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ from __future__ import annotations
 import copy as _copy
 import json
 from pathlib import Path
-from typing import Iterable, Optional
+from typing import Iterable, Optional, Sequence
 
 import networkx as nx
 import numpy as np
@@ -53,7 +61,7 @@ TIERS = ("auto", "candidate")   # what detection says of a loop before a person 
 
 # Attributes whose type is fixed by the contract; values are cast on the way in and out.
 _NODE_TYPES = {"index": int, "frame": int, "stamp": float, "shift": int, "label": str,
-               "x": float, "y": float, "heading": float}
+               "x": float, "y": float, "heading": float, "session": str}
 _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
@@ -63,6 +71,7 @@ EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_
                  "step_inliers", "confidence", "closure", "plane_share", "distance_steps", "rule", "reason")
 # Graph attributes: every map parameter with its declared type (bools stored as 0/1).
 _GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float, "positions": str,
+                "sessions": str, "decisions": str,
                 **{p.name: (int if p.type is bool else p.type) for p in PARAMETERS}}
 
 
@@ -95,21 +104,34 @@ class TopoMap:
         self.node_rows = node_rows          # rows of the Descriptors that are nodes
         self.node_vectors = node_vectors    # (m, d) descriptors of the nodes, when known
         self.unapplied: dict[str, list] = {"loops": [], "manual": [], "labels": []}
+        # The pose graph's step measurements (engine.loops.pose_graph.step_measurements:
+        # dx, dy, dtheta, sigma_xy, sigma_theta per consecutive node pair), in memory only,
+        # for the g2o export; None when the map was read from a file or had no geometry.
+        self.step_measurements = None
 
     # ----- construction -------------------------------------------------------------
     @classmethod
     def build(cls, descs: Descriptors, node_rows: np.ndarray, loops: list[LoopCandidate],
-              params: MapParams, source: str = "", extra_meta: Optional[dict] = None) -> "TopoMap":
+              params: MapParams, source: str = "", extra_meta: Optional[dict] = None,
+              sessions: Optional[Sequence[str]] = None) -> "TopoMap":
+        """``sessions``: each node's recording name (a site): stored as node ``session``, and
+        sequential arcs join only consecutive nodes of one session."""
         node_rows = np.asarray(node_rows, dtype=np.int64)
         m = node_rows.size
         vectors = np.asarray(descs.vectors, dtype=np.float32)[node_rows]
+        if sessions is not None and len(sessions) != m:
+            raise InputError(f"sessions must name one recording per node ({m})")
         g = nx.Graph()
         for k, row in enumerate(node_rows):
             g.add_node(f"n{k}", index=k, frame=int(descs.frames[row]),
                        stamp=float(descs.stamps[row]), shift=int(descs.shifts[row]), label="")
+            if sessions is not None:
+                g.nodes[f"n{k}"]["session"] = str(sessions[k])
         if m > 1:
             path_sims = np.einsum("ij,ij->i", vectors[:-1], vectors[1:])
             for k in range(m - 1):
+                if sessions is not None and sessions[k] != sessions[k + 1]:
+                    continue   # a new recording: no path between them
                 g.add_edge(f"n{k}", f"n{k + 1}", kind="sequential",
                            similarity=float(path_sims[k]), status="auto")
         for lc in loops:
@@ -159,6 +181,26 @@ class TopoMap:
 
     def stamps(self) -> np.ndarray:
         return self._node_array("stamp", np.float64)
+
+    def node_sessions(self) -> Optional[np.ndarray]:
+        """Each node's ``session`` (str array, node order), or None for a one-recording map."""
+        nodes = self._ordered()
+        if not nodes or "session" not in self.graph.nodes[nodes[0]]:
+            return None
+        return np.asarray([str(self.graph.nodes[n].get("session", "")) for n in nodes], dtype=object)
+
+    def session_records(self) -> list[dict]:
+        """The graph's ``sessions`` list (name, source, descriptors, nodes), [] without one."""
+        raw = self.graph.graph.get("sessions")
+        if not raw:
+            return []
+        try:
+            records = json.loads(raw) if isinstance(raw, str) else list(raw)
+        except ValueError:
+            raise InputError("the map's 'sessions' attribute is not a JSON list") from None
+        if not isinstance(records, list) or not all(isinstance(r, dict) and "session" in r for r in records):
+            raise InputError("the map's 'sessions' attribute is not a list of recordings")
+        return records
 
     def positions(self, estimated: bool = False) -> Optional[tuple[np.ndarray, np.ndarray]]:
         """Node (x, y) when every node has one, else None; positions the pose graph estimated
@@ -263,14 +305,25 @@ class TopoMap:
         they are never lost across re-runs.
         """
         frame = {n: int(d["frame"]) for n, d in self.graph.nodes(data=True)}
+        site = self.node_sessions() is not None
+        session = {n: str(d.get("session", "")) for n, d in self.graph.nodes(data=True)}
+
+        def keyed(item: dict, *nodes: str) -> dict:
+            if site:   # a site: decisions keyed by (session, frame)
+                if len(nodes) == 1:
+                    item["session"] = session[nodes[0]]
+                else:
+                    item["sessions"] = [session[n] for n in nodes]
+            return item
+
         loops, manual = [], []
         for u, v, d in self.loops():
             if d["status"] == "manual":
-                manual.append({"frames": [frame[u], frame[v]],
-                               "yaw": float(d["yaw"]) if "yaw" in d else None})
+                manual.append(keyed({"frames": [frame[u], frame[v]],
+                                     "yaw": float(d["yaw"]) if "yaw" in d else None}, u, v))
             elif d["status"] != d.get("tier", "auto"):
-                loops.append({"frames": [frame[u], frame[v]], "status": d["status"]})
-        labels = [{"frame": frame[n], "label": self.graph.nodes[n]["label"]}
+                loops.append(keyed({"frames": [frame[u], frame[v]], "status": d["status"]}, u, v))
+        labels = [keyed({"frame": frame[n], "label": self.graph.nodes[n]["label"]}, n)
                   for n in self._ordered() if self.graph.nodes[n].get("label")]
         return {"loops": loops + _copy.deepcopy(self.unapplied["loops"]),
                 "manual": manual + _copy.deepcopy(self.unapplied["manual"]),
@@ -290,32 +343,52 @@ class TopoMap:
         if self.node_count == 0:
             self.unapplied = {k: list(_copy.deepcopy(dec.get(k, []))) for k in self.unapplied}
             return
-        order = self._ordered()
+        order = np.asarray(self._ordered(), dtype=object)
         frames = self.frames()
-        by_frame = {int(f): n for f, n in zip(frames, order)}
+        sessions = self.node_sessions()
+        if sessions is None:
+            sessions = np.full(order.size, "", dtype=object)
+        first_session = str(sessions[0])
+        recordings = {}   # session -> (its nodes in order, their frames, frame -> node)
+        for name in dict.fromkeys(sessions.tolist()):
+            mine = sessions == name
+            recordings[name] = (order[mine], frames[mine],
+                                {int(f): n for f, n in zip(frames[mine], order[mine])})
 
-        first, last = int(frames.min()), int(frames.max())
+        def session_of(item: dict, k: int) -> str:
+            """The session an item's k-th frame belongs to (the first session when unsaid)."""
+            if self.node_sessions() is None:
+                return ""
+            if "sessions" in item:
+                return str(item["sessions"][k])
+            return str(item.get("session", first_session))
 
-        def inside(*fs: int) -> bool:
-            """A decision on frames outside the recording's mapped span is kept as
-            unapplied, not snapped to the end node (a crafted n0-n99 loop, issue 16)."""
-            return all(first <= f <= last for f in fs)
+        def inside(s: str, f: int) -> bool:
+            """A decision on frames outside the recording's mapped span (or on a recording
+            not in this map) is kept as unapplied, not snapped to the end node (a crafted
+            n0-n99 loop, issue 16)."""
+            if s not in recordings:
+                return False
+            fs = recordings[s][1]
+            return int(fs.min()) <= f <= int(fs.max())
 
-        def nearest(f: int) -> str:  # the first of two equally near nodes
-            return order[int(np.argmin(np.abs(frames - f)))]
+        def nearest(s: str, f: int) -> str:  # the first of two equally near nodes
+            nodes, fs, _ = recordings[s]
+            return str(nodes[int(np.argmin(np.abs(fs - f)))])
 
         def is_loop(u: str, v: str) -> bool:
             return self.graph.has_edge(u, v) and self.graph.edges[u, v].get("kind") == "loop"
 
         for item in dec.get("loops", []):
             fa, fb = (int(f) for f in item["frames"])
+            sa, sb = session_of(item, 0), session_of(item, 1)
             status = item.get("status")
-            if not inside(fa, fb):
+            if not (inside(sa, fa) and inside(sb, fb)):
                 self.unapplied["loops"].append(_copy.deepcopy(item))
                 continue
-            u, v = by_frame.get(fa), by_frame.get(fb)
+            u, v = recordings[sa][2].get(fa), recordings[sb][2].get(fb)
             if u is None or v is None or not is_loop(u, v):
-                u, v = nearest(fa), nearest(fb)
+                u, v = nearest(sa, fa), nearest(sb, fb)
             if (status in SETTABLE_STATUSES and u != v and is_loop(u, v)
                     and self.graph.edges[u, v]["status"] != "manual"):
                 self.graph.edges[u, v]["status"] = status
@@ -324,10 +397,11 @@ class TopoMap:
 
         for item in dec.get("manual", []):
             fa, fb = (int(f) for f in item["frames"])
-            if not inside(fa, fb):
+            sa, sb = session_of(item, 0), session_of(item, 1)
+            if not (inside(sa, fa) and inside(sb, fb)):
                 self.unapplied["manual"].append(_copy.deepcopy(item))
                 continue
-            u, v = nearest(fa), nearest(fb)
+            u, v = nearest(sa, fa), nearest(sb, fb)
             yaw = item.get("yaw")
             if u != v and is_loop(u, v):
                 attrs = self.graph.edges[u, v]
@@ -340,10 +414,11 @@ class TopoMap:
                 self.unapplied["manual"].append(_copy.deepcopy(item))
 
         for item in dec.get("labels", []):
-            if not inside(int(item["frame"])):
+            s = session_of(item, 0)
+            if not inside(s, int(item["frame"])):
                 self.unapplied["labels"].append(_copy.deepcopy(item))
                 continue
-            self.graph.nodes[nearest(int(item["frame"]))]["label"] = str(item["label"])
+            self.graph.nodes[nearest(s, int(item["frame"]))]["label"] = str(item["label"])
 
     # ----- copies and export --------------------------------------------------------------
     def copy(self) -> "TopoMap":
@@ -351,6 +426,7 @@ class TopoMap:
                       None if self.node_rows is None else self.node_rows.copy(),
                       None if self.node_vectors is None else self.node_vectors.copy())
         out.unapplied = _copy.deepcopy(self.unapplied)
+        out.step_measurements = self.step_measurements
         return out
 
     def corrected(self, keep_rejected: bool = False, keep_candidates: bool = False) -> nx.Graph:
@@ -360,6 +436,12 @@ class TopoMap:
         corrected map holds what was accepted (automatically, confirmed or added by hand)."""
         g = nx.Graph()
         g.graph.update(_clean_meta(self.graph.graph))
+        if self.node_sessions() is not None:   # a site: its decisions, rejected ones included
+            dec = self.decisions()
+            if any(dec.values()):
+                g.graph["decisions"] = json.dumps(dec)
+            else:
+                g.graph.pop("decisions", None)
         for n in self._ordered():
             d = self.graph.nodes[n]
             g.add_node(n, **{k: _plain(v, _NODE_TYPES.get(k)) for k, v in d.items() if v is not None})

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Iterator, Optional
+from typing import Iterable, Iterator, Optional, Sequence
 
 import numpy as np
 
@@ -297,8 +297,13 @@ def descriptor_defaults(descs: Descriptors) -> dict:
     return paper_thresholds(descs.vectors, MapParams().neighbor_node_num)
 
 
-def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = ""):
-    """Nodes and loops from descriptors: cheap, re-run on every parameter change."""
+def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = "", *,
+              row_starts: Sequence[int] = (0,), sessions: Optional[Sequence[str]] = None):
+    """Nodes and loops from descriptors: cheap, re-run on every parameter change.
+
+    Several recordings (``engine.site``): ``descs`` concatenated, ``row_starts`` the first row
+    of each and ``sessions`` their names; nodes are made per recording, the thresholds
+    calibrated on the whole set, and the pose graph treats each recording as its own chain."""
     from .graph import TopoMap
     from .loops import detect_loops
     from .nodes import make_nodes
@@ -317,18 +322,32 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         wanted = "panorama-shifted" if params.uses_shift else "unshifted"
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "
                          f"{'without' if not params.uses_shift else 'with'} --no-shift")
-    node_rows = make_nodes(descs.vectors, p.node_sim_th)
+    bounds = [int(r) for r in row_starts] + [len(descs)]
+    parts = [make_nodes(descs.vectors[s:e], p.node_sim_th) + s for s, e in zip(bounds[:-1], bounds[1:])]
+    node_rows = np.concatenate(parts).astype(np.int64)
+    chain_starts = np.cumsum([0] + [part.size for part in parts[:-1]]).astype(np.int64)
+    node_sessions = None
+    if sessions is not None:
+        node_sessions = [str(name) for name, part in zip(sessions, parts) for _ in range(part.size)]
     columns = None if descs.columns is None else descs.columns[node_rows]
     frame_width = int(descs.meta.get("frame_width", 0))
     poses = None
+    steps = None
     if p.method == "verified":
+        from .loops.geometry import PairGeometry
+        from .loops.pose_graph import step_measurements
         from .loops.verified import detect_loops as verified
 
+        cache = descs.cache.setdefault(("nodes", p.node_sim_th), {})
+        features = getattr(descs, "features", None)
         found = verified(descs.vectors[node_rows], p, node_rows=node_rows,
-                         features=getattr(descs, "features", None), columns=columns,
+                         features=features, columns=columns,
                          shifts=descs.shifts[node_rows], frame_width=frame_width,
-                         cache=descs.cache.setdefault(("nodes", p.node_sim_th), {}))
+                         cache=cache, chain_starts=tuple(chain_starts.tolist()))
         loops, poses = found.loops, found.poses
+        if poses is not None:   # the step factors, for the g2o export (fits already cached)
+            fitted = PairGeometry(features, node_rows, descs.shifts[node_rows], frame_width, columns, cache).steps(p)
+            steps = None if fitted is None else step_measurements(fitted, chain_starts, p)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}
@@ -338,7 +357,8 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     if projection != "equirect":                     # converted to equirectangular as read
         extra["projection"] = projection
     topomap = TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
-                            extra_meta=extra)
+                            extra_meta=extra, sessions=node_sessions)
     if poses is not None:   # the pose graph's estimate, until ground truth or GPS replaces it
         topomap.set_positions(poses[:, 0], poses[:, 1], poses[:, 2], kind="estimated")
+        topomap.step_measurements = steps
     return topomap

@@ -240,3 +240,12 @@ def _hops(keys: np.ndarray, segments, loops: Loops, kept: np.ndarray):
         return np.array([dist[row[at[int(x)]], at[int(y)]] for x, y in zip(a, b)])
 
     return hops
+
+
+def step_measurements(steps: Steps, chain_starts: Sequence[int], params: MapParams):
+    """The step factors ``solve`` uses, for exports (g2o): (dx, dy, dtheta, sigma_xy,
+    sigma_theta), one entry per consecutive node pair (i, i + 1): the relative pose in node
+    i's frame (x, y in node steps, theta in radians) and its standard deviations. A pair
+    across ``chain_starts`` (two recordings) is no factor; its entry means nothing."""
+    starts = np.unique(np.concatenate([[0], np.asarray(chain_starts, np.int64)]))
+    return _step_motion(steps, starts, params)
