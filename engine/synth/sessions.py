@@ -147,6 +147,33 @@ def close_pairs(p1: Poses, p2: Poses, dist_th: float = 1.0) -> np.ndarray:
 
 # ------------------------------------------------------------------ the pair
 
+def _poses(tr, n=None) -> Poses:
+    n = tr.t.size if n is None else n
+    return Poses(t=tr.t[:n].astype(np.float64), x=tr.x[:n].copy(), y=tr.y[:n].copy(), yaw=tr.yaw[:n].copy())
+
+
+def day_two_trajectory(route: str, look: str = "indoor", day2: DayTwo = DayTwo(), fps: float = 1.0):
+    """Day 2's trajectory of ``route`` (routes.Trajectory), its length (m), its waypoints and
+    the index of the first waypoint of the return leg."""
+    if route not in _BUILDERS:
+        raise InputError(f"unknown route {route!r}; choose one of {', '.join(_BUILDERS)}")
+    _, wps, _ = _BUILDERS[route](look)
+    path, back_at = day_two_path(wps, day2.start_frac, day2.back_frac, day2.lane)
+    tr, length = trajectory_from_waypoints(path, day2.speed, fps)
+    return tr, length, path, back_at
+
+
+def poses_pair(route: str = "loop", seed: int = 0, look: str = "indoor", *, fps: float = 1.0,
+               speed: float = 0.8, day2: DayTwo = DayTwo()) -> tuple[Poses, Poses]:
+    """The ground truth of ``day_pair`` with the same arguments, unrendered (the first family's
+    routes do not depend on the seed; it is taken for symmetry with the second family)."""
+    day2.check()
+    tr2 = day_two_trajectory(route, look, day2, fps)[0]
+    _, wps, _ = _BUILDERS[route](look)
+    tr1, _ = trajectory_from_waypoints(wps, speed, fps)
+    return _poses(tr1), _poses(tr2)
+
+
 def _expose(frame: np.ndarray, gain: np.ndarray) -> np.ndarray:
     return np.clip(frame.astype(np.float32) * gain + 0.5, 0, 255).astype(np.uint8)
 
@@ -171,9 +198,7 @@ def day_pair(route: str = "loop", seed: int = 0, look: str = "indoor", *, width:
     world = r.world
     world.people = make_people(world.walk_lines, day2.people, seed + day2.people_seed)
     world.seg_shade = wall_shade(world.seg_a, world.seg_b, look, LIGHT_ANGLE + day2.sun_turn).astype(np.float32)
-    _, wps, _ = _BUILDERS[route](look)
-    path, back_at = day_two_path(wps, day2.start_frac, day2.back_frac, day2.lane)
-    tr, length = trajectory_from_waypoints(path, day2.speed, fps)
+    tr, length, path, back_at = day_two_trajectory(route, look, day2, fps)
     n = tr.t.size if max_frames is None else min(tr.t.size, int(max_frames))
     gain = (day2.exposure * np.asarray(day2.white_balance, np.float32)).astype(np.float32)
     frames = np.empty((n, height, width, 3), np.uint8)
@@ -182,8 +207,8 @@ def day_pair(route: str = "loop", seed: int = 0, look: str = "indoor", *, width:
         report(progress, k, n, "rendering day 2")
         frames[k] = _expose(render(world, tr.x[k], tr.y[k], tr.yaw[k], tr.t[k], width, height), gain)
     report(progress, n, n, "rendering day 2")
-    stamps = tr.t[:n].astype(np.float64)
-    poses2 = Poses(t=stamps.copy(), x=tr.x[:n].copy(), y=tr.y[:n].copy(), yaw=tr.yaw[:n].copy())
+    poses2 = _poses(tr, n)
+    stamps = poses2.t.copy()
     meta = {k: v for k, v in rec1.meta.items() if k != "revisits"}   # day 1's own revisits
     meta.update({"generator": "panotopo.synth.sessions", "day": 2, "day2": asdict(day2),
                  "length_m": length, "speed": day2.speed, "people": day2.people,

@@ -33,7 +33,7 @@ from ..synth.recording import Recording
 from ..synth.sessions import DayPair, DayTwo, day_two_path
 from .camera import Camera, apply_camera
 from .paths import Trajectory, drive
-from .recording import make_recording
+from .recording import make_recording, poses_for
 from .render import render_view
 from .routes import ROUTES, RouteSpec, route_spec
 from .world import Things, World, build_world
@@ -86,6 +86,25 @@ def _things_again(spec: RouteSpec, tr: Trajectory, day1: Things, count: int,
                   np.array(person), np.array(angle))
 
 
+def day_two_trajectory(route: str, seed: int = 0, day2: DayTwo = DAY_TWO, fps: float = 1.0):
+    """Day 2's trajectory (paths.Trajectory: lap 0 forward, lap 1 the return leg), its
+    waypoints and the index of the first waypoint of the return leg."""
+    if route not in ROUTES:
+        raise InputError(f"unknown synth2 route {route!r}; choose from {', '.join(ROUTES)}")
+    spec = route_spec(route, seed)
+    path, back_at = day_two_path([w[:2] for w in spec.waypoints], day2.start_frac, day2.back_frac, day2.lane)
+    wps = [(x, y, 0 if k < back_at else 1) for k, (x, y) in enumerate(path)]
+    return drive(wps, day2.speed, fps), path, back_at
+
+
+def poses_pair(route: str, seed: int = 0, *, fps: float = 1.0, speed: float = 0.8,
+               day2: DayTwo = DAY_TWO) -> tuple[Poses, Poses]:
+    """The ground truth of ``day_pair`` with the same arguments, unrendered."""
+    day2.check()
+    tr, _, _ = day_two_trajectory(route, seed, day2, fps)
+    return poses_for(route, seed, fps, speed), Poses(t=tr.t.copy(), x=tr.x.copy(), y=tr.y.copy(), yaw=tr.yaw.copy())
+
+
 def day_pair(route: str, seed: int = 0, *, width: int = 256, fps: float = 1.0, speed: float = 0.8,
              day2: DayTwo = DAY_TWO, max_frames: Optional[int] = None,
              progress: Optional[Progress] = None, cancel: Optional[CancelToken] = None) -> DayPair:
@@ -101,9 +120,7 @@ def day_pair(route: str, seed: int = 0, *, width: int = 256, fps: float = 1.0, s
     world: World = build_world(spec, seed, tr1)                   # day 1's world, as rendered
     cam1 = Camera.draw(np.random.default_rng([int(seed), 4]), int(tr1.lap.max()) + 1, world.indoor)
 
-    path, back_at = day_two_path([w[:2] for w in spec.waypoints], day2.start_frac, day2.back_frac, day2.lane)
-    wps = [(x, y, 0 if k < back_at else 1) for k, (x, y) in enumerate(path)]
-    tr = drive(wps, day2.speed, fps)
+    tr, path, back_at = day_two_trajectory(route, seed, day2, fps)
     rng = np.random.default_rng([int(seed) + day2.people_seed, 41])
     c, s = np.cos(day2.sun_turn), np.sin(day2.sun_turn)
     world2 = replace(world, things=_things_again(spec, tr, world.things, day2.people, rng),
