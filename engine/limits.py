@@ -85,7 +85,7 @@ def table() -> list[tuple[str, str]]:
         ("--window-size", f"1 to {MAX_NODE_COUNT_PARAM:,}"),
         ("--count-th / --neighbor-node-num", f"0 to {MAX_NODE_COUNT_PARAM:,}"),
         ("--dist-th", f"above 0, up to {MAX_DIST_TH_M:g} m"),
-        ("nodes for verified-rules (and the plot's similarity picture)", f"{MAX_DENSE_NODES:,}"),
+        ("nodes in the plot's similarity picture", f"{MAX_DENSE_NODES:,}"),
         ("descriptors in memory while describing", f"{MAX_DESCRIBE_BYTES / 2**30:g} GiB"),
         (".npz member / whole file, uncompressed", f"{MAX_NPZ_MEMBER_BYTES / 2**30:g} / {MAX_NPZ_TOTAL_BYTES / 2**30:g} GiB"),
         ("ground-truth poses", f"at least 2, covering {MIN_POSES_COVERAGE:.0%} of the node stamps"),
