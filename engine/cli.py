@@ -178,7 +178,13 @@ def _check_arguments(args: argparse.Namespace) -> None:
         if args.input_height is not None:
             validate.integer(args.input_height, "--input-height", lo=limits.MIN_INPUT_HEIGHT,
                              hi=limits.MAX_INPUT_HEIGHT)
-    inputs = [getattr(args, k, None) for k in ("input", "map", "poses")]
+    inputs = []
+    for k in ("input", "map", "poses"):
+        value = getattr(args, k, None)
+        inputs += list(value) if isinstance(value, (list, tuple)) else [value]
+    inputs = [_poses_path(v) if isinstance(v, str) else v for v in inputs]
+    if isinstance(getattr(args, "g2o", None), str):
+        check_output(args.g2o, inputs + [args.output, getattr(args, "plot", None), getattr(args, "json", None)])
     for key in ("output", "plot", "json"):
         if getattr(args, key, None) and isinstance(getattr(args, key), str):
             check_output(getattr(args, key), inputs)
@@ -208,7 +214,7 @@ def _distinct_paths(args: argparse.Namespace) -> None:
     over it, and exited 0)."""
     from .errors import InputError
 
-    named = [(f"--{k}", getattr(args, k, None)) for k in ("output", "plot", "json")]
+    named = [(f"--{k}", getattr(args, k, None)) for k in ("output", "plot", "json", "g2o")]
     named = [(flag, path) for flag, path in named if isinstance(path, str) and path]
     inputs = []
     for key in ("input", "map", "poses"):
@@ -222,6 +228,12 @@ def _distinct_paths(args: argparse.Namespace) -> None:
         for src in inputs:
             if _same_path(path, src):
                 raise InputError(f"{flag} {path}: the same file as the input {src}; choose another output name")
+
+
+def _poses_path(text: str) -> str:
+    """The file of a ``--poses`` value (``SESSION=PATH`` names a recording of a site)."""
+    name, sep, rest = text.partition("=")
+    return rest if sep and name and not Path(text).exists() else text
 
 
 def _load_poses(path: str, topic: Optional[str]):
@@ -249,9 +261,57 @@ def cmd_describe(args: argparse.Namespace) -> int:
     return 0
 
 
+def _map_site(args: argparse.Namespace, inputs: list) -> int:
+    """``map A B C`` (or ``map SITE.graphml D``): one map of several recordings (engine/site.py)."""
+    from .errors import InputError
+    from .exports import write_g2o, write_map, write_node_link_json
+    from .loops.paper import loop_progress
+    from .site import components_line, map_site
+
+    if args.poses:
+        raise InputError("--poses positions a map of one recording; for several, give each recording's "
+                         "poses to 'panotopo eval SITE.graphml --poses NAME=PATH ...'")
+    params = _map_params(args)
+    bar = _Bar(args.quiet)
+    try:
+        with loop_progress(bar):
+            out = map_site(inputs, params, _describe_settings(args, params.uses_shift), cache=_cache(args),
+                           auto_thresholds=args.auto_thresholds, progress=bar)
+    finally:
+        bar.close()
+    for line in out.notes:
+        print(f"panotopo: {line}", file=sys.stderr)
+    topomap = out.topomap
+    write_map(topomap, args.output, keep_candidates=args.keep_candidates)
+    cross = sum(1 for u, v, _ in topomap.loops(("auto", "confirmed", "manual"))
+                if topomap.graph.nodes[u]["session"] != topomap.graph.nodes[v]["session"])
+    _say(args, f"wrote {args.output}: {len(out.sessions)} recordings, {topomap.node_count} nodes, "
+               f"{len(topomap.loops())} loops ({cross} across recordings; method {topomap.meta.get('method')}, "
+               f"descriptor {topomap.meta.get('descriptor')})")
+    line = components_line(out.components)
+    if line:
+        print(f"warning: {line}", file=sys.stderr)
+    if getattr(args, "json", None):
+        write_node_link_json(topomap, args.json, keep_candidates=args.keep_candidates)
+        _say(args, f"wrote {args.json} (networkx node-link JSON)")
+    if getattr(args, "g2o", None):
+        write_g2o(topomap, args.g2o, keep_candidates=args.keep_candidates)
+        _say(args, f"wrote {args.g2o} (g2o pose graph)")
+    if args.plot:
+        from .plots import plot_map
+        plot_map(topomap, None, None, args.plot)
+        _say(args, f"wrote {args.plot}")
+    return 0
+
+
 def cmd_map(args: argparse.Namespace) -> int:
     from .run import run
+    from .site import is_site_map
 
+    inputs = list(args.input) if isinstance(args.input, (list, tuple)) else [args.input]
+    if len(inputs) > 1 or is_site_map(inputs[0]):
+        return _map_site(args, inputs)
+    args.input = inputs[0]
     params = _map_params(args)
     poses = _load_poses(args.poses, args.pose_topic) if args.poses else None
     from .loops.paper import loop_progress
@@ -277,6 +337,11 @@ def cmd_map(args: argparse.Namespace) -> int:
     if getattr(args, "json", None):
         write_node_link_json(topomap, args.json, keep_candidates=args.keep_candidates)
         _say(args, f"wrote {args.json} (networkx node-link JSON)")
+    if getattr(args, "g2o", None):
+        from .exports import write_g2o
+
+        write_g2o(topomap, args.g2o, keep_candidates=args.keep_candidates)
+        _say(args, f"wrote {args.g2o} (g2o pose graph)")
     if args.plot:
         from .plots import plot_map
         plot_map(topomap, out.poses, out.evaluation, args.plot)
@@ -290,6 +355,13 @@ def _evaluation_dict(ev) -> dict:
     for extra in ("events_found", "events_total"):
         if hasattr(ev, extra):
             out[extra] = getattr(ev, extra)
+    if getattr(ev, "sessions", 1) > 1:   # a site: within and across recordings apart
+        c = {k: getattr(ev, f"cross_{k}") for k in ("tp", "fp", "fn", "events_found", "events_total")}
+        out["recordings"] = ev.sessions
+        out["across"] = c
+        out["within"] = {"tp": ev.tp - c["tp"], "fp": ev.fp - c["fp"], "fn": ev.fn - c["fn"],
+                         "events_found": ev.events_found - c["events_found"],
+                         "events_total": ev.events_total - c["events_total"]}
     out["undefined"] = list(ev.undefined())  # ratios with a zero denominator: their 0.0 means n/a
     return out
 
@@ -301,6 +373,11 @@ def _evaluation_lines(ev) -> str:
              f"accuracy {ev.ratio_text('accuracy')}  F1 {ev.ratio_text('f1')}"]
     if "events_total" in d:
         lines.append(f"revisit events found {d['events_found']}/{d['events_total']}")
+    if "across" in d:
+        for part in ("within", "across"):
+            c = d[part]
+            lines.append(f"{part} recordings: TP {c['tp']}  FP {c['fp']}  FN {c['fn']}  "
+                         f"places found {c['events_found']}/{c['events_total']}")
     return "\n".join(lines)
 
 
@@ -309,7 +386,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from .graph import TopoMap
 
     topomap = TopoMap.read_graphml(args.map)
-    poses = _load_poses(args.poses, args.pose_topic)
+    given = list(args.poses)
+    sessions = topomap.node_sessions()
+    if sessions is None and len(given) == 1:
+        poses = _load_poses(_poses_path(given[0]), args.pose_topic)
+    else:
+        poses = _site_poses(topomap, given, args.pose_topic)
     ev = evaluate(topomap, poses, dist_th=args.dist_th)
     if args.json:
         print(json.dumps(_evaluation_dict(ev)))
@@ -321,10 +403,36 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _site_poses(topomap, given: list, topic: Optional[str]) -> dict:
+    """Each recording's poses: ``NAME=PATH`` by session name, plain paths in the order of the
+    map's recordings (those not named)."""
+    from .errors import InputError
+
+    names = list(dict.fromkeys((topomap.node_sessions() if topomap.node_sessions() is not None
+                                else ["" for _ in range(1)]).tolist()))
+    out: dict = {}
+    plain = []
+    for text in given:
+        name, sep, path = text.partition("=")
+        if sep and name in names and not Path(text).exists():
+            if name in out:
+                raise InputError(f"--poses {text}: poses of {name} given twice")
+            out[name] = _load_poses(path, topic)
+        else:
+            plain.append(text)
+    rest = [n for n in names if n not in out]
+    if len(plain) != len(rest):
+        raise InputError(f"the map has {len(names)} recordings ({', '.join(names)}); "
+                         f"give one --poses per recording (in that order, or as NAME=PATH), got {len(given)}")
+    for name, text in zip(rest, plain):
+        out[name] = _load_poses(text, topic)
+    return out
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
-    from .evaluate import evaluate
-    from .pipeline import DescribeSettings, build_map, describe, method_settings
+    from .pipeline import DescribeSettings
     from .plots import plot_map
+    from .run import run
     from .synth import make_recording
 
     out = Path(args.out).resolve()
@@ -338,16 +446,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
     bar = _Bar(args.quiet)
     try:
         options = {"input_height": args.input_height} if args.input_height else {}
-        settings = method_settings(MapParams(), DescribeSettings(interval=args.interval, options=options))
-        descs = describe(written["video"], settings, progress=bar, cache=None)
+        result = run(written["video"], MapParams(), settings=DescribeSettings(interval=args.interval, options=options),
+                     poses=rec.poses, evaluate=True, progress=bar)
     finally:
         bar.close()
-    topomap = build_map(descs, MapParams(), source=str(written["video"]))
-    x, y = rec.poses.at(topomap.stamps())
-    topomap.set_positions(x, y)
+    topomap, ev = result.topomap, result.evaluation
     graphml = out / "demo.graphml"
     topomap.write_graphml(graphml)
-    ev = evaluate(topomap, rec.poses)
     plot = out / "demo_map.png"
     plot_map(topomap, rec.poses, ev, plot)
     _say(args, f"map: {topomap.node_count} nodes, {len(topomap.loops())} loops (method {topomap.meta.get('method')})")
@@ -452,10 +557,15 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("map", parents=[common], help="build a topological map (GraphML) from a recording")
-    p.add_argument("input", help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz")
+    p.add_argument("input", nargs="+", metavar="INPUT",
+                   help="video, ROS1 .bag, ROS2 bag (directory, .db3, .mcap), image folder, or descriptors .npz; "
+                        "several make one map of a site (each a 'session'), and a site .graphml among them "
+                        "adds the others to it (its recordings and decisions kept)")
     p.add_argument("-o", "--output", required=True,
-                   help="output map: .graphml, or .json for networkx node-link JSON (engine/exports.py)")
+                   help="output map: .graphml, .json for networkx node-link JSON, or .g2o for the pose graph "
+                        "(engine/exports.py)")
     p.add_argument("--json", metavar="PATH", help="also write the map as networkx node-link JSON")
+    p.add_argument("--g2o", metavar="PATH", help="also write the pose graph as g2o (VERTEX_SE2 / EDGE_SE2)")
     p.add_argument("--method", default=MapParams().method, choices=METHODS,
                    help="loop detection method (default: %(default)s; 'ours' is the paper's)")
     _add_sampling(p)
@@ -496,7 +606,9 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
 
     p = sub.add_parser("eval", parents=[common], help="evaluate a map against ground-truth poses (the paper's metrics)")
     p.add_argument("map", help="a .graphml written by panotopo")
-    p.add_argument("--poses", required=True, help="CSV t,x,y[,yaw] on the map's clock, or a bag")
+    p.add_argument("--poses", required=True, action="append",
+                   help="CSV t,x,y[,yaw] on the map's clock, or a bag; a map of several recordings takes one "
+                        "--poses per recording (all in one world frame), in the map's order or as NAME=PATH")
     p.add_argument("--pose-topic", help="pose topic in a bag")
     p.add_argument("--dist-th", type=float, default=1.0, help="same-place distance in metres (default: 1.0)")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
