@@ -330,7 +330,12 @@ def cmd_map(args: argparse.Namespace) -> int:
     topomap = out.topomap
     from .exports import write_map, write_node_link_json
 
-    write_map(topomap, args.output, keep_candidates=args.keep_candidates)   # .json: node-link JSON
+    bar = _Bar(args.quiet)
+    try:  # a map of many loops takes minutes to write (GraphML of 740,000 loops: about 2 min)
+        bar(0, 0, f"writing {args.output}")
+        write_map(topomap, args.output, keep_candidates=args.keep_candidates)   # .json: node-link JSON
+    finally:
+        bar.close()
     loops = topomap.loops()
     _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
