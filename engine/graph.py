@@ -90,8 +90,14 @@ def _plain(value, kind=None):
     return json.dumps(value, default=str)  # lists, dicts: one string
 
 
+# networkx's own GraphML bookkeeping (read_graphml puts it into the graph's attributes; its
+# writer takes it as dicts): never a map attribute.
+_NETWORKX_KEYS = ("node_default", "edge_default")
+
+
 def _clean_meta(meta: dict) -> dict:
-    return {str(k): _plain(v, _GRAPH_TYPES.get(k)) for k, v in meta.items() if v is not None}
+    return {str(k): _plain(v, _GRAPH_TYPES.get(k)) for k, v in meta.items()
+            if v is not None and k not in _NETWORKX_KEYS}
 
 
 class TopoMap:
@@ -484,6 +490,8 @@ class TopoMap:
         for _, _, d in g.edges(data=True):
             d.setdefault("status", "auto")
             d.setdefault("kind", "sequential")
+        for key in _NETWORKX_KEYS:
+            g.graph.pop(key, None)
         meta = dict(g.graph)
         return cls(g, meta, None, None)
 
