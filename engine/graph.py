@@ -141,8 +141,10 @@ class TopoMap:
                 g.add_edge(f"n{k}", f"n{k + 1}", kind="sequential",
                            similarity=float(path_sims[k]), status="auto")
         for lc in loops:
-            if not (0 <= lc.a < m and 0 <= lc.b < m) or abs(lc.b - lc.a) < 2:
-                continue  # out of range, or already a path arc
+            if not (0 <= lc.a < m and 0 <= lc.b < m) or lc.a == lc.b:
+                continue  # out of range
+            if abs(lc.b - lc.a) < 2 and (sessions is None or sessions[lc.a] == sessions[lc.b]):
+                continue  # already a path arc
             tier = lc.status if lc.status in TIERS else "auto"
             attrs = dict(kind="loop", similarity=float(lc.similarity), status=tier, tier=tier,
                          window_count=int(lc.window_count))

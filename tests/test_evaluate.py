@@ -233,3 +233,65 @@ def test_plot_map_writes_a_png(tmp_path, with_poses):
         green = (rgb[..., 1] > 0.45) & (rgb[..., 0] < 0.35) & (rgb[..., 2] < 0.35)
         red = (rgb[..., 0] > 0.7) & (rgb[..., 1] < 0.3) & (rgb[..., 2] < 0.3)
         assert green.sum() > 50 and red.sum() > 50
+
+
+# ----- several recordings (a site map): nodes carry ``session``, each on its own clock --------
+# A drives out along y = 0 (x = 0, 2, ..., 10), B drives back along y = 0.3 (x = 10, 8, ..., 0);
+# both recordings start at t = 0 and frame 0.
+SITE_A = np.array([(2.0 * k, 0.0) for k in range(6)])
+SITE_B = np.array([(10.0 - 2.0 * k, 0.3) for k in range(6)])
+
+
+def site_map() -> TopoMap:
+    m = 12
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=(m, 8)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    descs = Descriptors(stamps=np.tile(np.arange(6) * 2.0, 2), frames=np.tile(np.arange(6) * 60, 2),
+                        shifts=np.zeros(m, np.int64), vectors=v, meta={"descriptor": "t"})
+    loops = [LoopCandidate(a, b, 0.6, 3) for a, b in
+             [(0, 11), (5, 6), (2, 9), (1, 7), (0, 3)]]
+    params = MapParams(method="ours", node_sim_th=0.8, loop_sim_th=0.5, neighbor_node_num=1)
+    return TopoMap.build(descs, np.arange(m), loops, params, sessions=["A"] * 6 + ["B"] * 6)
+
+
+def site_poses() -> dict:
+    t = np.arange(6) * 2.0
+    return {"A": Poses(t=t, x=SITE_A[:, 0], y=SITE_A[:, 1]), "B": Poses(t=t, x=SITE_B[:, 0], y=SITE_B[:, 1])}
+
+
+def test_a_site_counts_pairs_across_recordings_apart_and_the_boundary_is_no_path_arc():
+    tm = site_map()
+    g = tm.graph
+    assert not g.has_edge("n5", "n6") or g.edges["n5", "n6"]["kind"] == "loop"   # no path between recordings
+    ev = evaluate(tm, site_poses(), dist_th=0.5)
+    # across: (0, 11), (5, 6) and (2, 9) join one place, (1, 7) two places 6 m apart
+    assert (ev.cross_tp, ev.cross_fp) == (3, 1)
+    assert ev.fp - ev.cross_fp == 1                        # (0, 3) within A: two places
+    assert ev.tp + ev.fp + ev.tn + ev.fn == 12 * 11 // 2 - 10   # every pair less the 10 path arcs
+    # every place of A is driven again in B: six places across, three found
+    assert ev.cross_events_total == ev.events_total and ev.cross_fn == ev.fn
+    assert 1 <= ev.cross_events_found <= ev.cross_events_total
+    assert ev.sessions == 2
+
+
+def test_a_site_needs_one_set_of_poses_per_recording():
+    tm = site_map()
+    with pytest.raises(InputError, match="one set of poses per recording"):
+        evaluate(tm, site_poses()["A"])
+    with pytest.raises(InputError, match="recording B"):
+        evaluate(tm, {"A": site_poses()["A"]})
+
+
+def test_site_decisions_are_keyed_by_session_and_frame():
+    tm = site_map()
+    tm.set_status("n2", "n9", "rejected")   # frames 120 (A) and 180 (B)
+    tm.set_label("n8", "door")              # frame 120 of B, the same frame number as n2 of A
+    dec = tm.decisions()
+    assert dec["loops"] == [{"frames": [120, 180], "status": "rejected", "sessions": ["A", "B"]}]
+    assert dec["labels"] == [{"frame": 120, "label": "door", "session": "B"}]
+    again = site_map()
+    again.apply_decisions({**dec, "labels": dec["labels"] + [{"frame": 0, "label": "x", "session": "C"}]})
+    assert again.graph.edges["n2", "n9"]["status"] == "rejected"
+    assert again.graph.nodes["n8"]["label"] == "door" and again.graph.nodes["n2"]["label"] == ""
+    assert again.unapplied["labels"] == [{"frame": 0, "label": "x", "session": "C"}]   # not in this map: kept
