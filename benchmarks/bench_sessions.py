@@ -6,9 +6,13 @@
 For every (route, look, seed) the day pair (``engine.synth.sessions.day_pair`` /
 ``engine.synth2.sessions.day_pair``: the same world, other light, other people, another
 start, part of the route driven the other way) is rendered at 256x128, 1 frame/s, and each
-day described as ``bench_families.describe_rgb`` does (cached under --cache as
-``sessions_<family>_<route>_<look>_s<seed>_day<k>_h128[_<photometric>].npz``, the ground truth
-beside it as ``..._day<k>_poses.csv``). Then:
+day described with the options ``bench_families.describe_rgb`` uses (effnet-vlad at input
+height 128, the method's photometric option) and ONE vocabulary for both days: day 1's own,
+fixed for day 2 (``--vocabulary day1``; ``own`` describes each day with its own vocabulary,
+what two separate ``panotopo describe`` runs give today: their vectors are not comparable,
+see ``described``). Cached under --cache as
+``sessions_<family>_<route>_<look>_s<seed>_day<k>_<vocabulary>_h128[_<photometric>].npz``, the
+ground truth beside it as ``..._day<k>_poses.csv``. Then:
 
 (a) each day is mapped alone (``engine.run.run``);
 (b) both are mapped together as one site (``map_together``: ``engine.site.map_site`` on the two
@@ -86,7 +90,7 @@ def cases(family: str, seeds, routes=None, looks=None) -> list[PairCase]:
 # ------------------------------------------------------------------ recordings
 
 def _poses_csv(path: Path) -> Path:
-    return path.with_name(path.name.split("_h128")[0] + "_poses.csv")
+    return path.with_name(path.name.split("_h128")[0].rsplit("_", 1)[0] + "_poses.csv")
 
 
 def _save_poses(poses: Poses, path: Path) -> None:
@@ -112,16 +116,59 @@ def render_pair(case: PairCase):
     return day_pair(case.route, case.seed, width=256, fps=1.0)
 
 
-def described(case: PairCase, cache: Path) -> list[tuple[Path, Descriptors, Poses]]:
-    """Both days: (descriptors .npz, descriptors, poses), rendered and described when not cached."""
-    paths = [bf.cache_path(cache, case.name(k)) for k in (1, 2)]
+VOCABULARIES = ("day1", "own")
+
+
+def _describe(frames, stamps, name: str, model):
+    from engine.frames import Frame
+    from engine.pipeline import DescribeSettings, describe_frames
+
+    options = {"input_height": 128, **({} if bf.PHOTOMETRIC["value"] == "none" else
+                                       {"photometric": bf.PHOTOMETRIC["value"]})}
+    settings = DescribeSettings(interval=1.0, options=options)
+    items = (Frame(k, float(t), rgb) for k, (t, rgb) in enumerate(zip(stamps, frames)))
+    t0 = time.perf_counter()
+    d = describe_frames(items, len(stamps), settings, model=model, source=name)
+    d.meta["bench_fps"] = len(stamps) / max(time.perf_counter() - t0, 1e-9)
+    return d
+
+
+def _model(vocabulary=None):
+    from engine import descriptors as registry
+
+    options = {"input_height": 128, **({} if bf.PHOTOMETRIC["value"] == "none" else
+                                       {"photometric": bf.PHOTOMETRIC["value"]})}
+    if vocabulary is not None:
+        options["vocabulary"] = vocabulary
+    return registry.get("effnet-vlad", **options)
+
+
+def described(case: PairCase, cache: Path, vocabulary: str = "day1") -> list[tuple[Path, Descriptors, Poses]]:
+    """Both days: (descriptors .npz, descriptors, poses), rendered and described when not cached.
+
+    effnet-vlad pools over a vocabulary clustered from the recording itself, and the .npz
+    does not keep it: two recordings described apart (``vocabulary="own"``, what two
+    ``panotopo describe`` calls give) have descriptors in two different spaces. ``"day1"``
+    describes day 1 with its own vocabulary and day 2 with day 1's (fixed) vocabulary, as
+    ``--vocabulary`` does; both files then name that vocabulary (sha1) in their settings."""
+    names = [f"{case.name(k)}_{vocabulary}" for k in (1, 2)]
+    paths = [bf.cache_path(cache, n) for n in names]
     if not all(p.is_file() and _poses_csv(p).is_file() for p in paths):
         pair = render_pair(case)
-        for k, rec in ((1, pair.day1), (2, pair.day2)):
-            bf.describe_rgb(rec.frames, rec.stamps, case.name(k), cache)
-            _save_poses(rec.poses, _poses_csv(paths[k - 1]))
-    return [(p, bf.describe_rgb(None, None, case.name(k), cache)[0], _load_poses(_poses_csv(p)))
-            for k, p in zip((1, 2), paths)]
+        cache.mkdir(parents=True, exist_ok=True)
+        model = _model()
+        d1 = _describe(pair.day1.frames, pair.day1.stamps, names[0], model)
+        if vocabulary == "day1":
+            model = _model(np.array(model.vocabulary, copy=True))
+        else:
+            model = _model()
+        d2 = _describe(pair.day2.frames, pair.day2.stamps, names[1], model)
+        if vocabulary == "day1":   # day 1 was pooled over exactly these centres
+            d1.meta["settings"] = dict(d2.meta["settings"])
+        for d, path, rec in ((d1, paths[0], pair.day1), (d2, paths[1], pair.day2)):
+            d.save(path)
+            _save_poses(rec.poses, _poses_csv(path))
+    return [(p, Descriptors.load(p), _load_poses(_poses_csv(p))) for p in paths]
 
 
 # ------------------------------------------------------------------ maps, in one neutral form
@@ -285,8 +332,8 @@ def score_across(view: MapView, poses: list[Poses]) -> dict:
 
 # ------------------------------------------------------------------ the run
 
-def run_case(case: PairCase, cache: Path, params: MapParams) -> dict:
-    days = described(case, cache)
+def run_case(case: PairCase, cache: Path, params: MapParams, vocabulary: str = "day1") -> dict:
+    days = described(case, cache, vocabulary)
     npz = [p for p, _, _ in days]
     poses = [pz for _, _, pz in days]
     row = {"case": case, "nodes": [], "alone": [], "site": None}
@@ -391,6 +438,8 @@ def main() -> None:
     ap.add_argument("--looks", help="first family: comma-separated looks (default: indoor,outdoor)")
     ap.add_argument("--method", default=MapParams().method)
     ap.add_argument("--cache", default="/tmp/panotopo-sessions", help="descriptor cache folder")
+    ap.add_argument("--vocabulary", choices=VOCABULARIES, default="day1",
+                    help="effnet-vlad vocabulary: day1 (day 2 pooled over day 1's) or own (each day its own)")
     ap.add_argument("--note", default="", help="notes column of the row appended to runs.csv")
     ap.add_argument("--no-record", action="store_true", help="print the table only")
     args = ap.parse_args()
@@ -401,8 +450,11 @@ def main() -> None:
     rows = []
     for case in cases(args.family, seeds, split(args.routes), split(args.looks)):
         t0 = time.perf_counter()
-        rows.append(run_case(case, Path(args.cache), params))
-        print(f"{case.name(1)[:-5]}: {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+        rows.append(run_case(case, Path(args.cache), params, args.vocabulary))
+        x = (rows[-1]["site"] or {}).get("across", {})
+        print(f"{case.name(1)[:-5]}: {time.perf_counter() - t0:.1f} s; shared places found "
+              f"{x.get('found', '-')}/{x.get('shared', '-')}, across right/1-2 m/false "
+              f"{x.get('right', '-')}/{x.get('between', '-')}/{x.get('false', '-')}", file=sys.stderr, flush=True)
     t = totals(rows)
     print(table(rows) + "\n\n" + summary(t))
     if not args.no_record and t["mapped"]:
