@@ -204,3 +204,24 @@ def test_simple_reports_progress():
     calls = []
     detect_loops(v, params(method="simple", th=0.5), progress=lambda *a: calls.append(a))
     assert calls[-1] == (30, 30, loops.paper.SIMPLE_STAGE)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_ours_tiles_agree_exactly_when_the_arithmetic_is_exact(monkeypatch, seed):
+    """Vectors of eighths: every similarity is exact in float32 whatever the product's blocking,
+    so tiles of 16 nodes and one big tile must agree to the pair and the count (many ties
+    too). With real-valued vectors a pair within a rounding error of loop_sim_th may differ
+    between blockings of the matrix product (the previous row-block code did the same)."""
+    import engine.loops as loops
+
+    rng = np.random.default_rng(seed)
+    m, d = 300, int(rng.integers(4, 16))
+    v = (np.clip(np.cumsum(rng.integers(-1, 2, size=(m, d)), axis=0), -8, 8) / 8).astype(np.float32)
+    th = float(np.quantile(v @ v.T, 0.8))
+    p = params(th=th, w=int(rng.integers(3, 8)), c=2, nn=int(rng.integers(0, 6)))
+    whole = loops.paper._ours_pairs(v, p)
+    monkeypatch.setattr(loops.paper, "_BLOCK_ELEMENTS", 1)
+    tiled = loops.paper._ours_pairs(v, p)
+    assert whole[0].size > 0
+    for a, b in zip(whole, tiled):
+        assert np.array_equal(a, b)
