@@ -103,6 +103,7 @@ def data(tmp_path_factory) -> Path:
     _npz_arrays(d / "complex.npz", descriptors=(rng.normal(size=(12, 16)) * (1 + 1j)).astype(np.complex64))
     _npz_arrays(d / "bool.npz", descriptors=rng.random((12, 16)) > 0.5)
     _npz_arrays(d / "dup_frames.npz", frames=np.array([0, 1, 2, 3, 4, 5, 5, 6, 7, 8, 9, 10], np.int64))
+    _npz_arrays(d / "frames_half.npz", frames=np.arange(12) + 0.5)
     _npz_arrays(d / "backwards.npz", stamps=np.array([0, 1, 2, 3, 4, 5, 2.5, 7, 8, 9, 10, 11], np.float64))
     _npz_arrays(d / "colours_width.npz", colours=rng.random((12, 100)).astype(np.float16))
     zero = rng.normal(size=(12, 16)).astype(np.float32)
@@ -176,6 +177,7 @@ MAP = [
     (["bool.npz"], "true/false"),
     (["dup_frames.npz"], "frame 5 is described twice"),
     (["backwards.npz"], "stamps run backwards at row 6"),
+    (["frames_half.npz"], "whole numbers"),
     (["zero_row.npz"], "row 4 is all zeros"),
     (["good.npz", "--poses", "huge.csv"], "metres"),
     (["good.npz", "--poses", "ns.csv"], "seconds"),

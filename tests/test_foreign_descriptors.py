@@ -80,3 +80,14 @@ def test_integer_descriptors_are_normalised_and_the_user_is_told(foreign, tmp_pa
     lines = maps["ints"][1].strip().splitlines()
     assert len(lines) == 1 and "integers" in lines[0] and "normalised" in lines[0]
     assert maps["units"][1].strip() == ""
+
+
+def test_whole_frame_numbers_written_as_floats_are_read(tmp_path):
+    """Another tool may write frame numbers as floats; whole ones are read, silently."""
+    n = 20
+    v = random_walk_descriptors(n, 32, seed=1)[0]
+    path = tmp_path / "float_frames.npz"
+    np.savez(path, stamps=np.arange(n, dtype=np.float64), frames=np.arange(n, dtype=np.float64),
+             shifts=np.zeros(n), descriptors=v, meta=np.array('{"descriptor": "my-own-vpr"}'))
+    d = Descriptors.load(path)
+    assert d.frames.dtype == np.int64 and list(d.frames) == list(range(n)) and d.notes == []

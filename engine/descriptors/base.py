@@ -148,6 +148,8 @@ _KINDS = {"stamps": "fiu", "frames": "iu", "shifts": "iu", "descriptors": "fiu",
 def _check_kind(path: Path, key: str, arr: np.ndarray) -> None:
     """Refuse an array whose numbers are not of a kind ``key`` may hold (a cast would
     silently drop the imaginary part of complex numbers, or turn text into an error)."""
+    if arr.dtype.kind == "f" and _KINDS[key] == "iu" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
+        return  # whole numbers written as floats (another tool's file): read as they are
     if arr.dtype.kind not in _KINDS[key]:
         kind = {"c": "complex numbers", "b": "true/false values", "U": "text", "S": "bytes",
                 "M": "dates", "m": "time spans", "f": "fractional numbers"}.get(arr.dtype.kind, str(arr.dtype))
