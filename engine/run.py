@@ -12,6 +12,11 @@ The command line (``panotopo map``), the desktop app's worker and the benchmarks
 4. position   node positions from ground-truth ``poses`` (given, or the recording's own:
               a geotagged photo folder's EXIF GPS) where known;
 5. evaluate   ``engine.evaluate.evaluate`` against those poses, where known and asked.
+
+Several recordings (a list or tuple ``source``: recordings, .npz, site maps) are one site:
+stages 1-3 are ``engine.site.map_site`` (each recording described or loaded, one map);
+``poses`` is then a dict session -> Poses (evaluation only: the nodes keep the pose graph's
+estimate), and a site that falls apart adds one warning (``engine.site.components_line``).
 """
 
 from __future__ import annotations
@@ -46,6 +51,9 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
     from .pipeline import build_map, describe, is_descriptor_file, method_settings
     from .progress import check
 
+    if isinstance(source, (list, tuple)):
+        return _run_site(list(source), params, settings=settings, poses=poses, auto_thresholds=auto_thresholds,
+                         evaluate=evaluate, eval_nn=eval_nn, progress=progress, cancel=cancel, cache=cache)
     warnings: list[str] = []
     positions = "ground truth"   # graph attribute: what positioned the nodes
     if isinstance(source, Descriptors):                                            # 1
@@ -92,3 +100,22 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
 
         evaluation = score(topomap, poses, neighbor_node_num=eval_nn)
     return RunResult(descs, topomap, poses, evaluation, warnings)
+
+
+def _run_site(sources: list, params: MapParams, *, settings, poses, auto_thresholds: bool, evaluate: bool,
+              eval_nn, progress, cancel, cache) -> RunResult:
+    """``run`` of several recordings (module notes)."""
+    from .site import components_line, map_site
+
+    out = map_site(sources, params, settings, cache=cache, auto_thresholds=auto_thresholds,
+                   progress=progress, cancel=cancel)
+    warnings = list(out.notes)
+    line = components_line(out.components)
+    if line:
+        warnings.append(line)
+    evaluation = None
+    if evaluate and poses is not None:
+        from .evaluate import evaluate as score
+
+        evaluation = score(out.topomap, poses, neighbor_node_num=eval_nn)
+    return RunResult(out.descs, out.topomap, poses, evaluation, warnings)
