@@ -101,9 +101,8 @@ class MainWindow(QMainWindow):
 
         app = QApplication.instance()
         if app is not None:  # the thread must end before Qt does, whatever closes the app
-            app.aboutToQuit.connect(self.runner.stop)
-            app.aboutToQuit.connect(self.remapper.stop)
-            app.aboutToQuit.connect(self.similarity_worker.stop)
+            for worker in self.workers():
+                app.aboutToQuit.connect(worker.stop)
         self.autosave_timer = QTimer(self)
         self.autosave_timer.setInterval(int(1000 * self.defaults["ui"].get("autosave_seconds", 30)))
         self.autosave_timer.timeout.connect(self.sessions.autosave)
@@ -420,15 +419,19 @@ class MainWindow(QMainWindow):
             self.settings.setValue("window/geometry", self.saveGeometry())
         event.accept()
 
+    def workers(self) -> list:
+        """Every background worker of the window and its views (``gui.background.Worker``; the
+        run's through its controller, which forgets the run when it stops)."""
+        return [self.runner, self.remapper, self.similarity_worker, self.graph_view.layout_worker,
+                self.pair_view.match_worker, self.frame_viewer.loader.worker]
+
     def shutdown(self) -> None:
         """Stop the worker threads and timers and release the recording."""
         self.autosave_timer.stop()
         self.frame_viewer.shutdown()
         self.pair_view.shutdown()
-        self.graph_view.shutdown()
-        self.runner.stop()
-        self.remapper.stop()
-        self.similarity_worker.stop()
+        for worker in self.workers():   # quit + wait, each, before the window goes
+            worker.stop()
         self.files.close()  # the records stay until a save compacts them; nothing empty is left
         self.doc.journal = None
         app = QApplication.instance()
