@@ -14,7 +14,8 @@ calibration, retrieval over all nodes, support, places, tiers, the map and its G
 The map is made by the command line in a child process (``python -m engine map ...``), as a
 user would; the child's wall time and peak resident memory (``getrusage`` of children) are
 reported, with the node and loop counts and how many of the revisits across recordings have
-a loop (a loop within ``--tolerance`` rows of the revisit's true origin). Then one more
+a loop (a loop whose ends' first visits are within ``--tolerance`` rows: a place driven three times
+is one place). Then one more
 recording is added to the written site (``map site.graphml NEW.npz``), timed the same way.
 """
 
@@ -66,12 +67,15 @@ def _score(graphml: Path, origin: np.ndarray, rows: int, tolerance: int) -> dict
     loops = [(row[u], row[v]) for u, v, d in g.edges(data=True) if d["kind"] == "loop"]
     cross = [(a, b) for a, b in loops if a // rows != b // rows]
     n = origin.size
+    root = np.arange(n)
+    for i in np.flatnonzero(origin >= 0):   # the first visit of a place revisited more than once
+        root[i] = root[origin[i]]
     revisit = np.flatnonzero((origin >= 0) & (np.arange(n) // rows != np.maximum(origin, 0) // rows))
     hit = np.zeros(n, bool)
     true_cross = 0
     for a, b in cross:
         lo, hi = min(a, b), max(a, b)
-        ok = origin[hi] >= 0 and abs(origin[hi] - lo) <= tolerance
+        ok = abs(int(root[hi]) - int(root[lo])) <= tolerance
         true_cross += bool(ok)
         hit[max(0, hi - tolerance):hi + tolerance + 1] |= ok
     # revisit events across recordings: runs of consecutive revisit rows

@@ -81,7 +81,15 @@ def read_site(path: str | Path) -> tuple[list[SessionSource], dict]:
         records = [{"session": Path(source).name, "source": source, "descriptors": ""}]
     sessions = [SessionSource(str(r["session"]), str(r.get("source", "")), str(r.get("descriptors", "")))
                 for r in records]
-    return sessions, stored_decisions(topomap)
+    decisions = stored_decisions(topomap)
+    if topomap.node_sessions() is None:   # one recording's decisions, keyed by frame only: name it
+        name = sessions[0].name
+        for key in ("loops", "manual"):
+            for item in decisions.get(key, []):
+                item.setdefault("sessions", [name, name])
+        for item in decisions.get("labels", []):
+            item.setdefault("session", name)
+    return sessions, decisions
 
 
 def stored_decisions(topomap) -> dict:

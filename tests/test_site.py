@@ -186,3 +186,27 @@ def test_a_site_whose_recording_is_gone_and_a_recording_given_twice_are_one_line
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "twice" in err
     rc, out, err = _cli("map", site[0], files["B"], "-o", files["root"] / "z.graphml")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "already in the site" in err
+
+
+def test_a_one_recording_map_grown_into_a_site_keeps_its_decisions_on_its_own_recording(tmp_path):
+    from engine.loops import LoopCandidate
+    from engine.params import MapParams
+    from engine.site import read_site
+
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(12, 8)).astype(np.float32)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    descs = Descriptors(stamps=np.arange(12.0), frames=np.arange(12) * 10, shifts=np.zeros(12, np.int64),
+                        vectors=v, meta={"descriptor": "t"})
+    topomap = TopoMap.build(descs, np.arange(12), [LoopCandidate(1, 9, 0.7, 3)],
+                            MapParams(method="ours", node_sim_th=0.8, loop_sim_th=0.5),
+                            source=str(tmp_path / "day1.mp4"))
+    topomap.set_status("n1", "n9", "confirmed")
+    topomap.set_label("n4", "lift")
+    topomap.write_graphml(tmp_path / "day1.graphml")
+    sessions, decisions = read_site(tmp_path / "day1.graphml")
+    assert [s.name for s in sessions] == ["day1.mp4"]
+    # keyed to its own recording, so that 'map NEW day1.graphml' (the new one first) cannot
+    # put them on the new recording
+    assert decisions["loops"] == [{"frames": [10, 90], "status": "confirmed", "sessions": ["day1.mp4", "day1.mp4"]}]
+    assert decisions["labels"] == [{"frame": 40, "label": "lift", "session": "day1.mp4"}]
