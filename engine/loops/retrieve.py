@@ -53,11 +53,20 @@ def candidates(vectors: np.ndarray, params: MapParams, cache: dict) -> Pairs:
 
 def with_support(vectors: np.ndarray, pairs: Pairs, params: MapParams, cache: dict) -> Pairs:
     """Stage 2: ``pairs`` with ``support`` (the better of the forward and reverse mean
-    calibrated score along the stretch; NaN where there is none) and its ``direction``."""
+    calibrated score along the stretch; NaN where there is none) and its ``direction``.
+    Each pair's two means are cached, so a re-map computes only pairs it has not seen."""
     stats = background(vectors, params, cache)
-    fwd, _ = retrieval.diagonal_support(vectors, stats, pairs.a, pairs.b, params.support_half, +1)
-    rev, _ = retrieval.diagonal_support(vectors, stats, pairs.a, pairs.b, params.support_half, -1)
-    fwd, rev = np.nan_to_num(fwd, nan=-np.inf), np.nan_to_num(rev, nan=-np.inf)
+    store = cache.setdefault(("support",) + _key(vectors, params.support_half, params.neighbor_node_num), {})
+    m = vectors.shape[0]
+    ids = pairs.a * m + pairs.b
+    todo = np.unique(ids[[int(i) not in store for i in ids.tolist()]]) if ids.size else ids
+    if todo.size:
+        a, b = todo // m, todo % m
+        fwd, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, +1)
+        rev, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, -1)
+        store.update(zip(todo.tolist(), zip(fwd.tolist(), rev.tolist())))
+    both = np.array([store[i] for i in ids.tolist()], np.float64).reshape(-1, 2)
+    fwd, rev = np.nan_to_num(both[:, 0], nan=-np.inf), np.nan_to_num(both[:, 1], nan=-np.inf)
     best = np.maximum(fwd, rev)
     pairs.support = np.where(np.isfinite(best), best, np.nan)
     pairs.direction = np.where(rev > fwd, -1, 1).astype(np.int64)
