@@ -186,6 +186,8 @@ def test_a_site_whose_recording_is_gone_and_a_recording_given_twice_are_one_line
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "twice" in err
     rc, out, err = _cli("map", site[0], files["B"], "-o", files["root"] / "z.graphml")
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "already in the site" in err
+    rc, out, err = _cli("map", files["A"], files["C"], "--poses", files["P_rev"], "-o", files["root"] / "z.graphml")
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and "NAME=PATH" in err
 
 
 def test_a_one_recording_map_grown_into_a_site_keeps_its_decisions_on_its_own_recording(tmp_path):
