@@ -90,11 +90,14 @@ def describe(
     progress: Optional[Progress] = None,
     cancel: Optional[CancelToken] = None,
     cache: "descriptor_registry.cache.DescriptorCache | None" = None,
+    model=None,
 ) -> Descriptors:
     """Descriptors of a recording sampled every ``settings.interval`` seconds.
 
     A descriptors .npz written by ``describe`` is loaded as it is. With ``cache``
-    given, a previous result for the same file and settings is reused.
+    given, a previous result for the same file and settings is reused. ``model``: the
+    descriptor model to use (default: a new one from ``settings``), e.g. one holding the
+    vocabulary a site shares (``engine.site``).
     """
     from .descriptors.cache import cache_key
     from .features import FEATURES_VERSION
@@ -111,7 +114,7 @@ def describe(
     check_interval(settings.interval, "interval")
     if settings.sampling not in ("interval", "keyframes"):
         raise InputError(f"sampling: expected 'interval' or 'keyframes', got {settings.sampling!r}")
-    model = descriptor_registry.get(settings.descriptor, **settings.options)
+    model = model if model is not None else descriptor_registry.get(settings.descriptor, **settings.options)
     key = None
     if cache is not None:
         reading = {"interval": settings.interval, "topic": settings.topic}

@@ -187,9 +187,52 @@ def combine(parts: Sequence[Descriptors]) -> tuple[Descriptors, list[int]]:
     return combined, starts
 
 
-def load_session(session: SessionSource, settings, *, cache=None, progress=None, cancel=None) -> Descriptors:
+class _SharedVocabulary:
+    """One vocabulary for every recording a site describes. A descriptor that pools over a
+    vocabulary clustered from the recording itself (effnet-vlad's default, "map") gives
+    vectors that only compare within that recording: two recordings described apart are no
+    closer at one place than at places 5 m apart (benchmarks/bench_sessions.py). So the first
+    recording described fits the vocabulary (never from the cache, which would not hold it)
+    and every other one is pooled over it (``vocabulary`` fixed, named by its sha1 in the
+    settings, so those are cached)."""
+
+    def __init__(self, settings):
+        from . import descriptors as registry
+
+        self.settings = settings
+        self.model = registry.get(settings.descriptor, **settings.options)
+        self.fitting = getattr(self.model, "fixed_vocabulary", True) is False
+        self.fitted_on: Optional[str] = None     # the recording whose own vocabulary all share
+
+    def describe(self, source: str, *, cache=None, progress=None, cancel=None) -> Descriptors:
+        from . import descriptors as registry
+        from .pipeline import describe
+
+        if not self.fitting:
+            return describe(source, self.settings, progress=progress, cancel=cancel, cache=cache, model=self.model)
+        descs = describe(source, self.settings, progress=progress, cancel=cancel, cache=None, model=self.model)
+        fixed = registry.get(self.settings.descriptor, **{**self.settings.options, "vocabulary": self.model.vocabulary})
+        descs.meta["settings"] = fixed.settings()     # it was pooled over exactly these centres
+        self.model, self.fitting, self.fitted_on = fixed, False, str(source)
+        return descs
+
+
+def check_vocabularies(named: Sequence[tuple[str, Descriptors]], fitted_on: Optional[str] = None) -> None:
+    """One line when two recordings were each pooled over their own vocabulary (settings
+    ``vocabulary`` "map", or the one this site fitted): their vectors do not compare."""
+    own = [name for name, d in named if ((d.meta or {}).get("settings") or {}).get("vocabulary") == "map"]
+    own += [fitted_on] if fitted_on else []
+    if len(own) > 1:
+        raise InputError(f"{own[0]} and {own[1]} were each described over their own vocabulary, so their "
+                         f"descriptors do not compare: give the recordings themselves (a site describes them "
+                         f"over one vocabulary), not .npz files described apart")
+
+
+def load_session(session: SessionSource, settings, *, cache=None, progress=None, cancel=None,
+                 shared: Optional[_SharedVocabulary] = None) -> Descriptors:
     """A session's descriptors: its .npz when named and present, else its recording described
-    (through ``cache``: described again only when the cache has none)."""
+    (through ``cache``: described again only when the cache has none; over the site's
+    ``shared`` vocabulary where given)."""
     from .pipeline import describe, is_descriptor_file
 
     if session.descriptors and Path(session.descriptors).is_file():
@@ -197,6 +240,8 @@ def load_session(session: SessionSource, settings, *, cache=None, progress=None,
     if session.source and Path(session.source).exists():
         if is_descriptor_file(session.source):
             return Descriptors.load(session.source)
+        if shared is not None:
+            return shared.describe(session.source, cache=cache, progress=progress, cancel=cancel)
         return describe(session.source, settings, progress=progress, cancel=cancel, cache=cache)
     where = session.descriptors or session.source or "nowhere recorded"
     raise InputError(f"session {session.name}: neither its descriptors nor its recording can be found ({where})")
@@ -248,11 +293,13 @@ def map_site(inputs: Sequence[str], params: MapParams = MapParams(), settings=No
         raise InputError("no recordings to map")
     sessions, decisions = expand(inputs)
     settings = method_settings(params, settings)
+    shared = _SharedVocabulary(settings)
     parts = []
     for s in sessions:
-        parts.append(load_session(s, settings, cache=cache, progress=progress, cancel=cancel))
+        parts.append(load_session(s, settings, cache=cache, progress=progress, cancel=cancel, shared=shared))
         check(cancel)
     check_models([(s.name, d) for s, d in zip(sessions, parts)])
+    check_vocabularies([(s.name, d) for s, d in zip(sessions, parts)], shared.fitted_on)
     notes = [f"{s.name}: {note}" for s, d in zip(sessions, parts) for note in getattr(d, "notes", ())]
     if any(d.features is None for d in parts) and any(d.features is not None for d in parts):
         notes.append("some recordings have no local features: the site is mapped without two-view geometry")

@@ -212,3 +212,45 @@ def test_a_one_recording_map_grown_into_a_site_keeps_its_decisions_on_its_own_re
     # put them on the new recording
     assert decisions["loops"] == [{"frames": [10, 90], "status": "confirmed", "sessions": ["day1.mp4", "day1.mp4"]}]
     assert decisions["labels"] == [{"frame": 40, "label": "lift", "session": "day1.mp4"}]
+
+
+
+def test_recordings_described_apart_over_their_own_vocabularies_are_refused_in_one_line():
+    from engine.errors import InputError
+    from engine.site import check_vocabularies
+
+    def descs(vocabulary):
+        return Descriptors(stamps=np.arange(3.0), frames=np.arange(3), shifts=np.zeros(3, np.int64),
+                           vectors=np.eye(3, dtype=np.float32),
+                           meta={"descriptor": "effnet-vlad", "settings": {"vocabulary": vocabulary}})
+
+    with pytest.raises(InputError, match="own vocabulary"):
+        check_vocabularies([("a.npz", descs("map")), ("b.npz", descs("map"))])
+    with pytest.raises(InputError, match="own vocabulary"):
+        check_vocabularies([("a.npz", descs("map")), ("b.mp4", descs("sha1:1"))], fitted_on="b.mp4")
+    check_vocabularies([("a.mp4", descs("sha1:1")), ("b.mp4", descs("sha1:1"))])
+
+
+def test_a_site_describes_its_recordings_over_one_vocabulary(tmp_path):
+    # effnet-vlad's default vocabulary is clustered from the recording itself: a site fits it
+    # on the first recording and pools every other one over the same centres.
+    import cv2
+
+    import engine.synth as synth
+    from engine.params import MapParams
+    from engine.pipeline import DescribeSettings, method_settings
+    from engine.site import _SharedVocabulary
+
+    folders = []
+    for seed in (0, 1):
+        rec = synth.make_recording(route="crossing", look="indoor", seed=seed, width=128, height=64, max_frames=12)
+        folder = tmp_path / f"day{seed}"
+        folder.mkdir()
+        for k, rgb in enumerate(rec.frames[:12:3]):
+            cv2.imwrite(str(folder / f"{k:03d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        folders.append(folder)
+    shared = _SharedVocabulary(method_settings(MapParams(), DescribeSettings(options={"input_height": 64})))
+    first, second = (shared.describe(str(f)) for f in folders)
+    vocab = first.meta["settings"]["vocabulary"]
+    assert vocab.startswith("sha1:") and second.meta["settings"]["vocabulary"] == vocab
+    assert shared.fitted_on == str(folders[0])
