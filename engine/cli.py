@@ -264,7 +264,7 @@ def cmd_describe(args: argparse.Namespace) -> int:
 def _map_site(args: argparse.Namespace, inputs: list) -> int:
     """``map A B C`` (or ``map SITE.graphml D``): one map of several recordings (engine/site.py)."""
     from .errors import InputError
-    from .exports import write_g2o, write_map, write_node_link_json
+    from .exports import write_map
     from .loops.paper import loop_progress
     from .site import components_line, map_site
 
@@ -291,16 +291,7 @@ def _map_site(args: argparse.Namespace, inputs: list) -> int:
     line = components_line(out.components)
     if line:
         print(f"warning: {line}", file=sys.stderr)
-    if getattr(args, "json", None):
-        write_node_link_json(topomap, args.json, keep_candidates=args.keep_candidates)
-        _say(args, f"wrote {args.json} (networkx node-link JSON)")
-    if getattr(args, "g2o", None):
-        write_g2o(topomap, args.g2o, keep_candidates=args.keep_candidates)
-        _say(args, f"wrote {args.g2o} (g2o pose graph)")
-    if args.plot:
-        from .plots import plot_map
-        plot_map(topomap, None, None, args.plot)
-        _say(args, f"wrote {args.plot}")
+    _write_extras(args, topomap)
     return 0
 
 
@@ -328,7 +319,7 @@ def cmd_map(args: argparse.Namespace) -> int:
     for line in out.warnings:
         print(f"warning: {line}", file=sys.stderr)
     topomap = out.topomap
-    from .exports import write_map, write_node_link_json
+    from .exports import write_map
 
     bar = _Bar(args.quiet)
     try:  # a map of many loops takes minutes to write (GraphML of 740,000 loops: about 2 min)
@@ -339,19 +330,24 @@ def cmd_map(args: argparse.Namespace) -> int:
     loops = topomap.loops()
     _say(args, f"wrote {args.output}: {topomap.node_count} nodes, {len(loops)} loops "
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
+    _write_extras(args, topomap, out.poses, out.evaluation)
+    return 0
+
+
+def _write_extras(args: argparse.Namespace, topomap, poses=None, evaluation=None) -> None:
+    """The outputs asked for beside the map: node-link JSON, g2o, a picture."""
+    from .exports import write_g2o, write_node_link_json
+
     if getattr(args, "json", None):
         write_node_link_json(topomap, args.json, keep_candidates=args.keep_candidates)
         _say(args, f"wrote {args.json} (networkx node-link JSON)")
     if getattr(args, "g2o", None):
-        from .exports import write_g2o
-
         write_g2o(topomap, args.g2o, keep_candidates=args.keep_candidates)
         _say(args, f"wrote {args.g2o} (g2o pose graph)")
     if args.plot:
         from .plots import plot_map
-        plot_map(topomap, out.poses, out.evaluation, args.plot)
+        plot_map(topomap, poses, evaluation, args.plot)
         _say(args, f"wrote {args.plot}")
-    return 0
 
 
 def _evaluation_dict(ev) -> dict:

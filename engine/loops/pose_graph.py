@@ -19,7 +19,7 @@ spread along the stretch. Several recordings are several chains joined only by l
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Sequence
 
 import numpy as np
 
