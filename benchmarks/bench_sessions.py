@@ -211,11 +211,16 @@ def _site_api(npz: list[Path], params: MapParams) -> Optional[MapView]:
         from engine.site import map_site
     except ImportError:
         return None
+    from engine.errors import InputError
+
     try:
         res = map_site([str(p) for p in npz], params)
     except TypeError as err:   # the API is being written: build_map without sessions yet
         print(f"engine.site.map_site could not run ({err}); trying the CLI", file=sys.stderr)
         return None
+    except InputError as err:  # e.g. .npz files described over their own vocabularies
+        print(f"engine.site.map_site refused the pair: {err}", file=sys.stderr)
+        return MapView(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), [], "refused")
     return view_of(res.topomap.graph, [p.name for p in npz], "engine.site")
 
 
@@ -235,8 +240,12 @@ def _site_cli(npz: list[Path], params: MapParams) -> Optional[MapView]:
 
 
 def map_together(npz: list[Path], params: MapParams) -> Optional[MapView]:
-    """The two days as one site: the site API, else the CLI; None when neither can."""
-    return _site_api(npz, params) or _site_cli(npz, params)
+    """The two days as one site: the site API, else the CLI; None when neither can or the
+    site API refuses the pair (a line on stderr says why)."""
+    view = _site_api(npz, params)
+    if view is not None:
+        return None if view.how == "refused" else view
+    return _site_cli(npz, params)
 
 
 # ------------------------------------------------------------------ scoring
