@@ -618,7 +618,7 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
 
     p = sub.add_parser("demo", parents=[common], help="generate a synthetic recording, map it and evaluate it (offline)")
     p.add_argument("--out", default="panotopo-demo",
-                   help="output folder, created if needed (default: ./%(default)s; about 30 MB)")
+                   help="output folder, created if needed (default: ./%(default)s; about 47 MB: a video, three bags, poses, the map)")
     p.add_argument("--look", default="indoor", choices=("indoor", "outdoor"))
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--interval", type=float, default=1.0)
