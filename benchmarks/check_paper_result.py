@@ -1,5 +1,10 @@
 """The paper's qualitative result on the synthetic benchmark (mapping-engine issue, item 7).
 
+A measurement over rendered routes (about 4 minutes of rendering and describing on two
+loaded cores), so it lives beside the benchmarks, out of the test command:
+
+    python -m pytest -q benchmarks/check_paper_result.py
+
 Small recordings (256x128, descriptor input height 128), a reverse and a crossing route,
 the three methods of Table I with thresholds calibrated from each recording (the same
 for all three). What must hold, as in the paper's Tables II-V:
