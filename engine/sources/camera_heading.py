@@ -35,6 +35,21 @@ PROFILE_WIDTH = 360
 MAX_PAIR_GAP = 3        # pairs of key frames at most this many key frames apart
 
 
+class CameraHeadings:
+    """``FrameSource.headings`` for video readers (``self.path``): the camera's own heading per
+    frame (a GoPro's CORI track) where the pictures agree with it (``checked_headings``);
+    None otherwise. Read once."""
+
+    def headings(self) -> Optional[np.ndarray]:
+        """The camera's own heading per frame (a GoPro's CORI track), where the pictures agree
+        with it (``engine.sources.camera_heading``); None otherwise. Read once."""
+        if getattr(self, "_headings", None) is None:
+            headings, note = checked_headings(self, self.path)
+            self._headings = (headings,)
+            self.heading_note = note
+        return self._headings[0]
+
+
 def picture_turn(a: np.ndarray, b: np.ndarray) -> float:
     """Degrees (-180, 180] the content of panorama ``a`` appears displaced in ``b``, positive
     towards increasing columns (``engine.shift.relative_yaw``'s convention)."""

@@ -28,6 +28,7 @@ from typing import Iterator, Optional
 import cv2
 import numpy as np
 
+from .camera_heading import CameraHeadings
 from ..errors import InputError
 from ..frames import Frame, FrameSource, check_equirectangular
 from ..validate import frame_size
@@ -56,7 +57,7 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
     return cap
 
 
-class VideoSource(FrameSource):
+class VideoSource(CameraHeadings, FrameSource):
     """A video file; random access for the GUI and a single pass for sampling."""
 
     def __init__(self, path: str | Path, use_pyav: bool = True, keyframes: bool = True,
@@ -269,17 +270,6 @@ class VideoSource(FrameSource):
             self._stamps = self._consistent(np.asarray(seen, dtype=np.float64))
         finally:
             cap.release()
-
-    def headings(self) -> Optional[np.ndarray]:
-        """The camera's own heading per frame (a GoPro's CORI track), where the pictures agree
-        with it (``engine.sources.camera_heading``); None otherwise. Read once."""
-        if getattr(self, "_headings", None) is None:
-            from .camera_heading import checked_headings
-
-            headings, note = checked_headings(self, self.path)
-            self._headings = (headings,)
-            self.heading_note = note
-        return self._headings[0]
 
     def _frames_known(self, interval: float) -> Iterator[Frame]:
         """Single pass when the stamps are already known."""

@@ -17,6 +17,7 @@ from typing import Iterator, Optional
 
 import numpy as np
 
+from .camera_heading import CameraHeadings
 from ..errors import InputError
 from ..frames import Frame, FrameSource
 from ..validate import frame_size
@@ -24,7 +25,7 @@ from . import video_av
 from .projection import Projection, lens_inputs
 
 
-class Video360Source(FrameSource):
+class Video360Source(CameraHeadings, FrameSource):
     """A dual-fisheye or EAC video, delivered as equirectangular frames."""
 
     def __init__(self, path: str | Path, projection: Projection, keyframes_only: bool = False,
@@ -77,15 +78,4 @@ class Video360Source(FrameSource):
 
     def frames(self, interval: float = 1.0, max_width: Optional[int] = None) -> Iterator[Frame]:
         yield from self.sampler.frames(interval, max_width=max_width)
-
-    def headings(self) -> Optional[np.ndarray]:
-        """The camera's own heading per frame (a GoPro's CORI track), where the pictures agree
-        with it (``engine.sources.camera_heading``); None otherwise. Read once."""
-        if getattr(self, "_headings", None) is None:
-            from .camera_heading import checked_headings
-
-            headings, note = checked_headings(self, self.path)
-            self._headings = (headings,)
-            self.heading_note = note
-        return self._headings[0]
 
