@@ -24,7 +24,6 @@ import sys
 import time
 from pathlib import Path
 
-import av
 import numpy as np
 import pytest
 
@@ -40,18 +39,9 @@ ARRAYS = ("stamps", "frames", "shifts", "descriptors", "columns", "colours")
 
 def write_recording(path: Path, seed: int) -> Path:
     """A short 2:1 video of a random blocky panorama turning a little each frame."""
-    rng = np.random.default_rng(seed)
-    base = (rng.random((H // 8, W // 8, 3)) * 255).astype(np.uint8)
-    with av.open(str(path), "w") as out:
-        stream = out.add_stream("libx264", rate=FPS)
-        stream.width, stream.height, stream.pix_fmt = W, H, "yuv420p"
-        for i in range(FRAMES):
-            img = np.kron(np.roll(base, i, axis=1), np.ones((8, 8, 1), np.uint8))
-            for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                out.mux(packet)
-        for packet in stream.encode(None):
-            out.mux(packet)
-    return path
+    from benchmarks.bench_batch import write_recording as write
+
+    return write(path, seed, FRAMES, W, FPS)
 
 
 @pytest.fixture(scope="module")

@@ -76,7 +76,8 @@ def _beside(pairs: Pairs, owners: np.ndarray, half: int):
     """(a, b, owner) of every pair up to ``half`` nodes beside each pair in ``owners``."""
     reach = np.arange(-half, half + 1)
     da, db = (d.ravel() for d in np.meshgrid(reach, reach))
-    da, db = da[(da != 0) | (db != 0)], db[(da != 0) | (db != 0)]
+    moved = (da != 0) | (db != 0)
+    da, db = da[moved], db[moved]
     return (pairs.a[owners, None] + da).ravel(), (pairs.b[owners, None] + db).ravel(), np.repeat(owners, da.size)
 
 
