@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from engine.descriptors.base import Descriptors
 from engine.graph import TopoMap
@@ -84,3 +85,15 @@ def pano_folder(path, n: int = 20, revisit=(0, 15), roll: int = 64, width: int =
     for k, img in enumerate(frames):
         Image.fromarray(np.ascontiguousarray(img)).save(out / f"frame_{k:04d}.png")
     return out, frames
+
+
+@pytest.fixture
+def boxes(monkeypatch):
+    """Every message box the app shows, as (kind, text), answered at once (questions: No)."""
+    from PySide6.QtWidgets import QMessageBox
+
+    shown: list = []
+    for kind in ("critical", "warning", "information"):
+        monkeypatch.setattr(QMessageBox, kind, lambda *a, k=kind, **kw: shown.append((k, a[2])) or QMessageBox.Ok)
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **kw: shown.append(("question", a[2])) or QMessageBox.No)
+    return shown

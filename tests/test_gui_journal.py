@@ -15,16 +15,8 @@ from PySide6.QtCore import QSettings, Qt  # noqa: E402
 from PySide6.QtWidgets import QMessageBox  # noqa: E402
 
 from gui.main_window import MainWindow  # noqa: E402
+from gui_maps import boxes  # noqa: E402,F401  (a fixture)
 from test_gui_review import _route_descriptors  # noqa: E402
-
-
-@pytest.fixture
-def boxes(monkeypatch):
-    shown: list = []
-    for kind in ("critical", "warning", "information"):
-        monkeypatch.setattr(QMessageBox, kind, lambda *a, k=kind, **kw: shown.append((k, a[2])) or QMessageBox.Ok)
-    monkeypatch.setattr(QMessageBox, "question", lambda *a, **kw: shown.append(("question", a[2])) or QMessageBox.No)
-    return shown
 
 
 @pytest.fixture

@@ -13,21 +13,13 @@ from PySide6.QtWidgets import QMessageBox, QTableWidget  # noqa: E402
 
 from engine.session_fields import LABEL_MAX  # noqa: E402
 from gui.main_window import MainWindow  # noqa: E402
+from gui_maps import boxes  # noqa: E402,F401  (a fixture)
 from test_app_model import make_map  # noqa: E402
 from test_gui_review import _route_descriptors  # noqa: E402
 
 
 @pytest.fixture
-def told(monkeypatch):
-    shown: list = []
-    for kind in ("critical", "warning", "information"):
-        monkeypatch.setattr(QMessageBox, kind, lambda *a, k=kind, **kw: shown.append((k, a[2])) or QMessageBox.Ok)
-    monkeypatch.setattr(QMessageBox, "question", lambda *a, **kw: shown.append(("question", a[2])) or QMessageBox.No)
-    return shown
-
-
-@pytest.fixture
-def make_window(qtbot, tmp_path, told):
+def make_window(qtbot, tmp_path, boxes):
     windows = []
 
     def make(size=(1280, 720)) -> MainWindow:
@@ -87,7 +79,7 @@ def test_after_a_bulk_decision_the_current_row_stays_where_the_user_was(qtbot, m
     assert view.currentIndex().row() == 6
 
 
-def test_a_place_name_is_limited_where_it_is_typed(qtbot, make_window, told, tmp_path):
+def test_a_place_name_is_limited_where_it_is_typed(qtbot, make_window, boxes, tmp_path):
     """Defect 16: a name over 1,000 characters was saved, and the session then refused to load."""
     from engine.session import Session
 
@@ -102,7 +94,7 @@ def test_a_place_name_is_limited_where_it_is_typed(qtbot, make_window, told, tmp
     frame = int(w.doc.node_frames()[3])
     assert len(w.doc.label_of_frame(frame)) <= LABEL_MAX
     w.set_label(frame, "y" * (LABEL_MAX + 1))     # any other way in is refused, with a reason
-    assert told and "at most" in told[-1][1]
+    assert boxes and "at most" in boxes[-1][1]
     assert w.save_session()
     Session.load(w.doc.session_path)
 
