@@ -172,6 +172,9 @@ def _check_arguments(args: argparse.Namespace) -> None:
         validate.map_params(_map_params(args), name=_argument_name)
     if getattr(args, "dist_th", None) is not None:
         validate.number(args.dist_th, "--dist-th", above=0.0, hi=limits.MAX_DIST_TH_M)
+    if getattr(args, "found_within", None) is not None:
+        validate.number(args.found_within, "--found-within", above=0.0, hi=limits.MAX_DIST_TH_M)
+        validate.number(args.false_beyond, "--false-beyond", lo=args.found_within, hi=limits.MAX_DIST_TH_M)
     if args.command == "demo":
         validate.integer(args.seed, "--seed", lo=0, hi=limits.MAX_SEED)
         validate.integer(args.width, "--width", lo=limits.MIN_DEMO_WIDTH, hi=limits.MAX_DEMO_WIDTH)
@@ -383,7 +386,7 @@ def _evaluation_lines(ev) -> str:
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
-    from .evaluate import evaluate
+    from .evaluate import evaluate, evaluate_band
     from .graph import TopoMap
 
     topomap = TopoMap.read_graphml(args.map)
@@ -394,10 +397,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     else:
         poses = _site_poses(topomap, given, args.pose_topic)
     ev = evaluate(topomap, poses, dist_th=args.dist_th)
+    # The project's figures beside the paper's table (which stays at --dist-th): the band.
+    band = evaluate_band(topomap, poses, found_within=args.found_within, false_beyond=args.false_beyond)
     if args.json:
-        print(json.dumps(_evaluation_dict(ev)))
+        print(json.dumps({**_evaluation_dict(ev), "band": {k: v for k, v in band.as_dict().items()
+                                                           if k != "loop_band"}}))
     else:
-        print(_evaluation_lines(ev))
+        print(_evaluation_lines(ev) + "\nproject: " + band.text())
     if args.plot:
         from .plots import plot_map
         plot_map(topomap, poses, ev, args.plot)
@@ -612,6 +618,12 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
                         "--poses per recording (all in one world frame), in the map's order or as NAME=PATH")
     p.add_argument("--pose-topic", help="pose topic in a bag")
     p.add_argument("--dist-th", type=float, default=1.0, help="same-place distance in metres (default: 1.0)")
+    p.add_argument("--found-within", type=float, default=1.0, metavar="M",
+                   help="the project's figures: a place is found by a loop whose two views are within M metres "
+                        "(default: %(default)s)")
+    p.add_argument("--false-beyond", type=float, default=2.0, metavar="M",
+                   help="the project's figures: a loop more than M metres apart is false; loops between "
+                        "--found-within and M are neither right nor false (default: %(default)s)")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.add_argument("--plot", help="also write a PNG of the evaluated map")
     p.set_defaults(func=cmd_eval)

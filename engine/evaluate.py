@@ -37,11 +37,29 @@ pair across recordings counts (pairs = all pairs less the path arcs); the counts
 recordings are also given apart (``cross_tp``, ``cross_fp``, ``cross_fn`` and the revisit
 events with a pair across recordings, ``cross_events_found`` / ``cross_events_total``); the
 within-recording figures are the totals less these.
+
+The project's own figures (``evaluate_band``; issue 41, the owner's call): the paper's table
+above stays at its ``dist_th`` (1 m); beside it, a loop is scored by how far apart its two views
+are, with a don't-care band as place-recognition benchmarks have:
+
+* true: within ``found_within`` (1 m), not temporal neighbours (the paper's TP at 1 m);
+* don't care: more than ``found_within`` and at most ``false_beyond`` (1-2 m) apart, not temporal
+  neighbours: neither right nor false (the two views may well show one place);
+* false: more than ``false_beyond`` (2 m) apart, or between temporal neighbours at any distance
+  (the paper's rule, kept: such a loop breaks the topology; counted apart too, as
+  ``neighbour_loops``). A false loop is therefore always a paper FP; a don't-care loop is a
+  paper FP that the band forgives.
+* a place (a revisit event at ``found_within``, as above) is found when a true loop joins two
+  of its views: places found / places revisited equal the events of ``evaluate`` at
+  ``dist_th = found_within``.
+
+Which loops count is as above (rejected never, candidates with ``include_candidates``).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from enum import Enum
 from typing import Optional
 
 import numpy as np
@@ -234,6 +252,13 @@ def evaluate(topomap: TopoMap, poses=None, dist_th: float = 1.0,
 
     A map without nodes is refused (InputError): it has nothing to evaluate, and its
     four zeros read like a result."""
+    return _evaluate(topomap, poses, dist_th, neighbor_node_num, include_candidates)[0]
+
+
+def _evaluate(topomap: TopoMap, poses, dist_th: float, neighbor_node_num: Optional[int],
+              include_candidates: bool):
+    """``evaluate``, and what it measured on the way: (Evaluation, x, y, node index by id,
+    recording codes or None)."""
     if not dist_th >= 0 or dist_th == float("inf"):  # NaN compares false
         raise InputError(f"distance threshold must be a finite number >= 0, got {dist_th}")
     if topomap.graph.number_of_nodes() == 0:
@@ -300,7 +325,7 @@ def evaluate(topomap: TopoMap, poses=None, dist_th: float = 1.0,
                       cross_events_found=int((event_found & event_cross).sum()),
                       cross_events_total=int(event_cross.sum()), sessions=int(codes.max()) + 1)
 
-    return Evaluation(
+    ev = Evaluation(
         tp=tp, fp=fp, tn=tn, fn=fn,
         precision=_ratio(tp, tp + fp), recall=_ratio(tp, tp + fn),
         accuracy=_ratio(tp + tn, total), f1=_ratio(2 * tp, 2 * tp + fp + fn),
@@ -310,3 +335,110 @@ def evaluate(topomap: TopoMap, poses=None, dist_th: float = 1.0,
         event_closest=event_closest.tolist(), event_found=event_found.tolist(),
         event_span=event_span.tolist(), **{k: int(v) for k, v in across.items()},
     )
+    return ev, x, y, index, codes
+
+
+# The project's band (issue 41): a place is found by a loop within 1 m, a loop beyond 2 m is false.
+FOUND_WITHIN_M = 1.0
+FALSE_BEYOND_M = 2.0
+
+
+class LoopBand(str, Enum):
+    """How the project scores one loop by the distance between its two views (module doc)."""
+
+    TRUE = "true"
+    DONT_CARE = "don't care"
+    FALSE = "false"
+
+
+def _check_band(found_within: float, false_beyond: float) -> None:
+    for name, value in (("found_within", found_within), ("false_beyond", false_beyond)):
+        if not value >= 0 or value == float("inf"):  # NaN compares false
+            raise InputError(f"{name} must be a finite number of metres >= 0, got {value}")
+    if false_beyond < found_within:
+        raise InputError(f"false_beyond ({false_beyond:g} m) must be at least found_within ({found_within:g} m)")
+
+
+def loop_band(distance: float, found_within: float = FOUND_WITHIN_M,
+              false_beyond: float = FALSE_BEYOND_M) -> LoopBand:
+    """The band of a loop whose two views are ``distance`` metres apart (temporal neighbours
+    aside, which ``evaluate_band`` calls false): TRUE up to ``found_within`` (inclusive, the
+    nanometre of slack of ``dist_th``), FALSE beyond ``false_beyond``, DONT_CARE between."""
+    _check_band(found_within, false_beyond)
+    d2 = float(distance) ** 2
+    if _within(d2, found_within):
+        return LoopBand.TRUE
+    return LoopBand.DONT_CARE if _within(d2, false_beyond) else LoopBand.FALSE
+
+
+@dataclass
+class BandEvaluation:
+    """The project's figures (module doc): places found / revisited and loops by band."""
+
+    found_within: float
+    false_beyond: float
+    places_found: int
+    places_revisited: int
+    true_loops: int
+    dont_care_loops: int
+    false_loops: int
+    neighbour_loops: int = 0      # of the false loops: between temporal neighbours, within false_beyond
+    neighbor_node_num: int = 0
+    include_candidates: bool = False
+    # Band of every counted loop, keyed by node ids (u, v), u lower: "true", "don't care", "false".
+    loop_band: dict[tuple[str, str], str] = field(default_factory=dict)
+
+    @property
+    def place_recall(self) -> float:
+        """places found / places revisited (0.0 when no place is revisited)."""
+        return _ratio(self.places_found, self.places_revisited)
+
+    def as_dict(self) -> dict:
+        """JSON-ready (loop keys as "u-v")."""
+        d = asdict(self)
+        d["loop_band"] = {f"{u}-{v}": b for (u, v), b in self.loop_band.items()}
+        d["place_recall"] = self.place_recall
+        return d
+
+    def text(self) -> str:
+        """One line: the band, places found, loops by band."""
+        neighbours = f", {self.neighbour_loops} of them between temporal neighbours" if self.neighbour_loops else ""
+        return (f"places found {self.places_found}/{self.places_revisited} (a loop within "
+                f"{self.found_within:g} m); loops: true {self.true_loops}, "
+                f"{self.found_within:g}-{self.false_beyond:g} m (don't care) {self.dont_care_loops}, "
+                f"false {self.false_loops} (beyond {self.false_beyond:g} m{neighbours})")
+
+
+def evaluate_band(topomap: TopoMap, poses=None, found_within: float = FOUND_WITHIN_M,
+                  false_beyond: float = FALSE_BEYOND_M, neighbor_node_num: Optional[int] = None,
+                  include_candidates: bool = False) -> BandEvaluation:
+    """Score the map's loops with the project's don't-care band (module doc): places found /
+    revisited at ``found_within``, and every counted loop true, don't care or false.
+
+    ``poses``, ``neighbor_node_num`` and ``include_candidates`` as in ``evaluate``."""
+    _check_band(found_within, false_beyond)
+    ev, x, y, index, codes = _evaluate(topomap, poses, found_within, neighbor_node_num, include_candidates)
+    nn = ev.neighbor_node_num
+    counts = {band: 0 for band in LoopBand}
+    neighbours = 0
+    bands: dict[tuple[str, str], str] = {}
+    for u, v, d in topomap.loops():
+        status = d.get("status")
+        if status == "rejected" or (status == "candidate" and not include_candidates):
+            continue
+        i, j = index[u], index[v]
+        across = codes is not None and codes[i] != codes[j]
+        if j - i < 2 and not across:
+            continue  # a path arc, not a pair we count
+        band = loop_band(float(np.hypot(x[i] - x[j], y[i] - y[j])), found_within, false_beyond)
+        if not across and j - i <= nn and band is not LoopBand.FALSE:
+            band = LoopBand.FALSE   # temporal neighbours: the paper's rule (module doc)
+            neighbours += 1
+        counts[band] += 1
+        bands[(u, v)] = band.value
+    return BandEvaluation(
+        found_within=float(found_within), false_beyond=float(false_beyond),
+        places_found=ev.events_found, places_revisited=ev.events_total,
+        true_loops=counts[LoopBand.TRUE], dont_care_loops=counts[LoopBand.DONT_CARE],
+        false_loops=counts[LoopBand.FALSE], neighbour_loops=neighbours, neighbor_node_num=nn,
+        include_candidates=bool(include_candidates), loop_band=bands)
