@@ -23,6 +23,10 @@ Recordings are 256x128 at 1 frame/s, the default descriptor at input height 128,
 and descriptors cached under --cache. A *false loop* joins nodes more than 1 m apart (or
 temporal neighbours); an *event* is one place the robot came back to, found when one of its
 same-place pairs is a loop. "with candidates" counts what a person reviewing the queue sees.
+Beside these (the paper's 1 m), the project's own figures (issue 41; ``engine.evaluate.evaluate_band``):
+the automatic loops within 1 m (true), 1-2 m apart (neither right nor false: a don't-care band)
+and false (beyond 2 m, or between temporal neighbours), and of the queue the candidates the band
+calls false; the band's places found are the events found above (a loop within 1 m).
 Each method is mapped on the descriptors it asks for (``MapParams.describe_options``:
 ``verified`` with effnet-vlad's ``photometric=standardise``, the others plain), described once
 per kind and cached beside each other (``*_h128.npz``, ``*_h128_standardise.npz``; a recording
@@ -219,7 +223,8 @@ def table(rows: list[Row], methods) -> str:
     from benchmarks.harness import sum_rows
 
     lines = ["| family | route | method | runs | false loops | events found | with candidates | "
-             "candidates (false) | precision | recall |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "candidates (false) | precision | recall | band: loops <=1 m / 1-2 m / false | "
+             "band: candidates false |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     fams = sorted({r.family for r in rows})
     for fam in fams:
         fr = [r for r in rows if r.family == fam]
@@ -232,7 +237,9 @@ def table(rows: list[Row], methods) -> str:
                              f"{t['events_found']}/{t['events_total']} | "
                              f"{t['events_with_candidates']}/{t['events_total']} | "
                              f"{t['candidates']} ({t['false_candidates']}) | "
-                             f"{t['precision']:.3f} | {t['recall']:.3f} |")
+                             f"{t['precision']:.3f} | {t['recall']:.3f} | "
+                             f"{t['true_loops']} / {t['dont_care_loops']} / {t['band_false_loops']} | "
+                             f"{t['band_false_candidates']} |")
     return "\n".join(lines)
 
 
@@ -338,7 +345,9 @@ def record(rows: list[Row], methods, family: str, seeds, groups, params: dict, n
                     "runs": t["runs"], "places": t["events_total"], "places_found": t["events_found"],
                     "false_loops": t["fp"], "with_queue": t["events_with_candidates"],
                     "queue": t["candidates"], "false_in_queue": t["false_candidates"],
-                    "notes": "; ".join(filter(None, (note, "bench_families.py " + " ".join(extra))))})
+                    "notes": "; ".join(filter(None, (note, "bench_families.py " + " ".join(extra)))),
+                    "true_loops": t["true_loops"], "dont_care_loops": t["dont_care_loops"],
+                    "band_false_loops": t["band_false_loops"]})
     print(f"appended {len(methods)} row(s) to {RUNS}", file=sys.stderr)
 
 

@@ -57,12 +57,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_families as bf  # noqa: E402
 from engine.descriptors.base import Descriptors  # noqa: E402
+from engine.evaluate import FALSE_BEYOND_M, FOUND_WITHIN_M, LoopBand, loop_band  # noqa: E402
 from engine.params import MapParams  # noqa: E402
 from engine.poses import Poses  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 EVAL_NN = bf.EVAL_NN        # temporal neighbours (nodes) never counted as revisits
-RIGHT_M, FALSE_M = 1.0, 2.0  # a loop across the days: right within 1 m, false beyond 2 m
+RIGHT_M, FALSE_M = FOUND_WITHIN_M, FALSE_BEYOND_M  # a loop across the days: right within 1 m, false beyond 2 m
 FIRST_ROUTES = ("crossing", "reverse", "offset", "loop")
 FIRST_LOOKS = ("indoor", "outdoor")
 
@@ -326,13 +327,14 @@ def score_across(view: MapView, poses: list[Poses]) -> dict:
         event = pair_event.get((a, b))
         if status in FOUND:
             out["joined"] = True
-            out["right" if dist <= RIGHT_M + 1e-9 else "between" if dist <= FALSE_M else "false"] += 1
+            out[{LoopBand.TRUE: "right", LoopBand.DONT_CARE: "between",
+                 LoopBand.FALSE: "false"}[loop_band(dist, RIGHT_M, FALSE_M)]] += 1
             if event is not None:
                 found.add(event)
                 with_queue.add(event)
         elif status == "candidate":
             out["queue"] += 1
-            out["queue_false"] += int(dist > FALSE_M)
+            out["queue_false"] += int(loop_band(dist, RIGHT_M, FALSE_M) is LoopBand.FALSE)
             if event is not None:
                 with_queue.add(event)
     out["found"], out["with_queue"] = len(found), len(with_queue)

@@ -5,7 +5,10 @@ noise). Each recording is rendered once, described once per panorama-shift setti
 once more per describe option a method asks for (``engine.params.METHOD_DESCRIBE_OPTIONS``;
 cached as .npz when a cache folder is given), and then mapped by every method from the
 descriptors it asks for; each map is scored against the ground-truth poses with
-``engine.evaluate`` (the paper's TP/FP/TN/FN plus revisit events).
+``engine.evaluate`` (the paper's TP/FP/TN/FN plus revisit events) and with the project's
+don't-care band (``engine.evaluate.evaluate_band``: loops within 1 m true, 1-2 m neither right
+nor false, beyond 2 m or between temporal neighbours false; its places found / revisited are
+the revisit events above, ``events_found`` / ``events_total``).
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from typing import Iterable, Optional
 import numpy as np
 
 from engine.descriptors.base import Descriptors
-from engine.evaluate import evaluate
+from engine.evaluate import evaluate, evaluate_band
 from engine.frames import Frame
 from engine.params import METHODS, MapParams
 from engine.pipeline import DescribeSettings, describe_frames, method_settings
@@ -144,6 +147,13 @@ class Row:
     event_closest: tuple = ()        # per event: closest same-place pair, metres
     event_found: tuple = ()          # per event: found by an automatic loop
     event_span: tuple = ()           # per event: the most nodes between its two visits
+    # The project's band (engine.evaluate.evaluate_band), automatic loops: within 1 m, 1-2 m
+    # (neither right nor false), false (beyond 2 m or temporal neighbours); and the review
+    # queue's candidates that the band calls false.
+    true_loops: int = 0
+    dont_care_loops: int = 0
+    band_false_loops: int = 0
+    band_false_candidates: int = 0
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -174,11 +184,15 @@ def score_map(topomap, poses: Poses, case, method: str, eval_nn: int = 5, fps: f
     ev = evaluate(topomap, poses, neighbor_node_num=eval_nn)
     with_cand = evaluate(topomap, poses, neighbor_node_num=eval_nn, include_candidates=True)
     cands = len(topomap.loops(("candidate",)))
+    band = evaluate_band(topomap, poses, neighbor_node_num=eval_nn)
+    band_with_cand = evaluate_band(topomap, poses, neighbor_node_num=eval_nn, include_candidates=True)
     return Row(case.route, case.look, case.seed, method, topomap.node_count, ev.tp, ev.fp,
                ev.tn, ev.fn, ev.precision, ev.recall, ev.accuracy, ev.f1, ev.events_found,
                ev.events_total, fps, getattr(case, "people", 0), getattr(case, "family", "synth"),
                cands, with_cand.fp - ev.fp, with_cand.events_found,
-               tuple(ev.event_closest), tuple(ev.event_found), tuple(ev.event_span))
+               tuple(ev.event_closest), tuple(ev.event_found), tuple(ev.event_span),
+               band.true_loops, band.dont_care_loops, band.false_loops,
+               band_with_cand.false_loops - band.false_loops)
 
 
 PAPER_METHODS = ("simple", "shift-simple", "ours")
@@ -214,7 +228,9 @@ def sum_rows(rows: list[Row], method: str) -> dict:
     sel = [r for r in rows if r.method == method]
     tot = {k: sum(getattr(r, k) for r in sel) for k in ("tp", "fp", "tn", "fn", "events_found", "events_total",
                                                         "candidates", "false_candidates",
-                                                        "events_with_candidates")}
+                                                        "events_with_candidates", "true_loops",
+                                                        "dont_care_loops", "band_false_loops",
+                                                        "band_false_candidates")}
     tp, fp, fn = tot["tp"], tot["fp"], tot["fn"]
     tot["precision"] = tp / (tp + fp) if tp + fp else 0.0
     tot["recall"] = tp / (tp + fn) if tp + fn else 0.0

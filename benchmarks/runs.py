@@ -12,7 +12,16 @@ A benchmark that measures places found on a family of recordings calls ``append_
   ``false_loops`` (loop arcs between nodes more than 1 m apart, or temporal neighbours),
   ``with_queue`` (found by an automatic loop or a candidate of the review queue), ``queue``
   (candidates left for a person) and ``false_in_queue`` (of them, not the same place);
-- ``notes``: free text (what was different about the run: a parameter, a branch, "held out").
+- ``notes``: free text (what was different about the run: a parameter, a branch, "held out");
+- added after ``notes`` (issue 41, the project's don't-care band, ``engine.evaluate.evaluate_band``;
+  empty in older rows): ``true_loops`` (automatic loops joining views within 1 m, not temporal
+  neighbours), ``dont_care_loops`` (1-2 m apart: neither right nor false), ``band_false_loops``
+  (beyond 2 m, or between temporal neighbours). The band's places found / revisited are
+  ``places_found`` / ``places`` (a place is found by a loop within 1 m either way), and
+  ``false_loops`` keeps its meaning (the paper's 1 m: the band's don't-care loops included).
+
+Older files whose header lacks the added columns are brought up to date by ``append_run``
+(the header line alone is rewritten; old rows read the added cells as empty).
 
 Rows dated up to 2026-11-27 were read from the Markdown tables that used to live in
 ``benchmarks/results/`` (each note names its file and line; read one with
@@ -37,7 +46,8 @@ from pathlib import Path
 
 RUNS = Path(__file__).resolve().parent / "results" / "runs.csv"
 COLUMNS = ("date", "commit", "family", "seeds", "method", "runs", "places", "places_found",
-           "false_loops", "with_queue", "queue", "false_in_queue", "notes")
+           "false_loops", "with_queue", "queue", "false_in_queue", "notes",
+           "true_loops", "dont_care_loops", "band_false_loops")
 
 
 def _commit() -> str:
@@ -81,6 +91,8 @@ def append_run(row: dict, path: Path = RUNS) -> dict:
     path = Path(path)
     new = not path.exists() or path.stat().st_size == 0
     path.parent.mkdir(parents=True, exist_ok=True)
+    if not new:
+        _upgrade_header(path)
     with path.open("a", newline="", encoding="utf-8") as f:
         w = csv.DictWriter(f, fieldnames=COLUMNS, lineterminator="\n")
         if new:
@@ -89,10 +101,26 @@ def append_run(row: dict, path: Path = RUNS) -> dict:
     return out
 
 
+def _upgrade_header(path: Path) -> None:
+    """An older header (the first columns of ``COLUMNS``, in order) is replaced by today's; the
+    rows stay as they are (their missing last cells read as empty). Any other header is refused."""
+    with path.open(newline="", encoding="utf-8") as f:
+        first = f.readline()
+        header = next(csv.reader([first]), [])
+        if tuple(header) == COLUMNS:
+            return
+        if tuple(header) != COLUMNS[:len(header)]:
+            raise ValueError(f"{path}: unexpected header {header}; expected {', '.join(COLUMNS)}")
+        rest = f.read()
+    ending = "\r\n" if first.endswith("\r\n") else "\n"
+    path.write_text(",".join(COLUMNS) + ending + rest, encoding="utf-8", newline="")
+
+
 def read_runs(path: Path = RUNS) -> list[dict]:
-    """Every row of ``runs.csv``, oldest first."""
+    """Every row of ``runs.csv``, oldest first (cells an older row lacks read as "")."""
     with Path(path).open(newline="", encoding="utf-8") as f:
-        return list(csv.DictReader(f))
+        return [{**dict.fromkeys(COLUMNS, ""), **{k: v for k, v in row.items() if k is not None}}
+                for row in csv.DictReader(f, restval="")]
 
 
 if __name__ == "__main__":   # the newest row per (family, seeds, method)
@@ -100,4 +128,4 @@ if __name__ == "__main__":   # the newest row per (family, seeds, method)
     for r in read_runs():
         latest[(r["family"], r["seeds"], r["method"])] = r
     for r in latest.values():
-        print(",".join(r[c] for c in COLUMNS[:-1]))
+        print(",".join(r[c] for c in COLUMNS if c != "notes"))

@@ -200,3 +200,39 @@ def test_eval_band_options(tmp_path, capsys):
     assert (d["tp"], d["fp"]) == (0, 1)                        # the paper's table at --dist-th 0.5
     code, _, err = run_cli(capsys, "eval", path, "--poses", csv, "--found-within", "2", "--false-beyond", "1")
     assert code != 0 and "--false-beyond" in err
+
+
+# ----- the benchmarks: the band in their rows and in the runs table ---------------------------
+
+def test_benchmark_rows_carry_the_band():
+    from types import SimpleNamespace
+
+    from benchmarks.harness import score_map, sum_rows
+
+    case = SimpleNamespace(route="r", look="l", seed=0, family="f")
+    rows = []
+    for apart in (0.5, 1.5, 2.5):
+        tm, poses = return_map(apart, loops=((1, 8), (0, 7)), statuses={(0, 7): "candidate"})
+        rows.append(score_map(tm, poses, case, "m", eval_nn=NN))
+    assert [(r.true_loops, r.dont_care_loops, r.band_false_loops) for r in rows] == [(1, 0, 0), (0, 1, 0), (0, 0, 1)]
+    assert [r.fp for r in rows] == [0, 1, 1]                  # the paper's 1 m, unchanged
+    assert all(r.band_false_candidates == 1 for r in rows)    # (0, 7) is 6 m apart
+    t = sum_rows(rows, "m")
+    assert (t["true_loops"], t["dont_care_loops"], t["band_false_loops"], t["band_false_candidates"]) == (1, 1, 1, 3)
+
+
+def test_the_runs_table_gains_the_band_columns_and_old_rows_stay_readable(tmp_path):
+    from benchmarks.runs import COLUMNS, append_run, read_runs
+
+    old = COLUMNS[:COLUMNS.index("notes") + 1]
+    path = tmp_path / "runs.csv"
+    path.write_text(",".join(old) + "\n2026-11-22,abc,first,0-4,ours,40,10,8,1,9,3,2,\"a note, with a comma\"\n")
+    append_run({"family": "first", "seeds": [0, 1], "method": "verified", "places": 10, "places_found": 9,
+                "false_loops": 2, "true_loops": 30, "dont_care_loops": 2, "band_false_loops": 0}, path)
+    rows = read_runs(path)
+    assert path.read_text().splitlines()[0] == ",".join(COLUMNS)
+    assert rows[0]["notes"] == "a note, with a comma" and rows[0]["false_loops"] == "1"
+    assert (rows[0]["true_loops"], rows[0]["dont_care_loops"], rows[0]["band_false_loops"]) == ("", "", "")
+    assert (rows[1]["true_loops"], rows[1]["dont_care_loops"], rows[1]["band_false_loops"]) == ("30", "2", "0")
+    append_run({"family": "first", "seeds": "0", "method": "ours"}, path)
+    assert len(read_runs(path)) == 3
