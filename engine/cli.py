@@ -274,6 +274,8 @@ def _map_site(args: argparse.Namespace, inputs: list) -> int:
     if args.poses:
         raise InputError("--poses positions a map of one recording; for several, give each recording's "
                          "poses to 'panotopo eval SITE.graphml --poses NAME=PATH ...'")
+    if args.odom_topic is not None:
+        raise InputError("--odom-topic is read for a map of one recording; a map of several is image-only")
     params = _map_params(args)
     bar = _Bar(args.quiet)
     try:
@@ -315,11 +317,14 @@ def cmd_map(args: argparse.Namespace) -> int:
         with loop_progress(bar):  # the loop search's progress (engine.run does not pass it down)
             out = run(args.input, params, settings=_describe_settings(args, params.uses_shift), poses=poses,
                       recording_poses=poses is None, auto_thresholds=args.auto_thresholds,
-                      evaluate=bool(args.plot), progress=bar, cache=_cache(args), poses_name=str(args.poses))
+                      evaluate=bool(args.plot), progress=bar, cache=_cache(args), poses_name=str(args.poses),
+                      metric=True, odom_topic=args.odom_topic)
     finally:
         bar.close()
     _report_skipped(args, out.descs)
-    for line in out.warnings:
+    for line in out.notes:
+        _say(args, line)
+    for line in out.warnings + _circular(args, out):
         print(f"warning: {line}", file=sys.stderr)
     topomap = out.topomap
     from .exports import write_map
@@ -335,6 +340,18 @@ def cmd_map(args: argparse.Namespace) -> int:
                f"(method {topomap.meta.get('method')}, descriptor {topomap.meta.get('descriptor')})")
     _write_extras(args, topomap, out.poses, out.evaluation)
     return 0
+
+
+def _circular(args: argparse.Namespace, out) -> list[str]:
+    """One line when the poses given to evaluate against are the odometry the map was built
+    with (the same bag and topic): such an evaluation is not independent."""
+    topic = getattr(out.metric, "odometry_topic", "") if out.metric is not None else ""
+    if not (topic and args.poses and _same_path(args.poses, args.input)):
+        return []
+    if args.pose_topic not in (None, topic):
+        return []
+    return [f"the poses ({args.poses} {topic}) are the odometry the pose graph was built with: an evaluation "
+            f"against them is not independent (map with --odom-topic none to keep them apart)"]
 
 
 def _write_extras(args: argparse.Namespace, topomap, poses=None, evaluation=None) -> None:
@@ -590,6 +607,10 @@ def build_parser(extra_commands: Sequence[AddCommand] = ()) -> argparse.Argument
     p.add_argument("--poses", help="ground-truth poses (CSV t,x,y[,yaw] or a bag) to store node positions "
                                     "(default for a photo folder: its EXIF GPS, when every photo has a fix)")
     p.add_argument("--pose-topic", help="pose topic in a bag (Odometry or PoseStamped)")
+    p.add_argument("--odom-topic", metavar="TOPIC|none",
+                   help="verified: the bag's odometry (Odometry or PoseStamped) that puts the pose graph in "
+                        "metres (default: its one such topic, if it has exactly one; 'none': image-only); "
+                        "a photo folder's or GoPro video's own GPS is used the same way")
     p.add_argument("--plot", help="also write a PNG of the map")
     p.set_defaults(func=cmd_map)
 

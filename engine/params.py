@@ -187,6 +187,39 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("graph_inlier_probability", float, 0.99, _NEW,
               "a loop the robust pose graph keeps fits at this chi-square probability",
               "the usual 99 % of robust back ends (Kimera-RPGO, GTSAM's GNC default)", 0.5, 0.999999),
+    # Metric factors (engine/metric.py): a recording's own odometry or GPS puts the pose graph in
+    # metres. None of these was tuned on a recording of this project; each comes from the
+    # sensor's usual figures, said below.
+    Parameter("odom_sigma_rate", float, 0.05, _NEW,
+              "uncertainty of an odometry step's position in the pose graph, as a share of its length "
+              "(a step shorter than 0.1 m counts 0.1 m)",
+              "wheel odometry of a calibrated robot drifts 1-5 % of the distance travelled (Borenstein "
+              "and Feng's UMBmark); the upper end, so that loops and GPS can correct it", 1e-4, 10.0),
+    Parameter("odom_turn_sigma_deg", float, 1.0, _NEW,
+              "uncertainty of an odometry step's turn in the pose graph, degrees per metre travelled "
+              "(a step shorter than 0.1 m counts 0.1 m)",
+              "gyro-aided odometry drifts well under a degree per metre, wheels alone about that much; "
+              "the conservative end", 1e-4, 180.0),
+    Parameter("gps_sigma_m", float, 3.0, _NEW,
+              "position uncertainty of a GPS fix that does not say its precision (EXIF), metres",
+              "GPS.gov: a phone's GPS is within 4.9 m 95 % of the time under open sky, about 2 m one "
+              "sigma per axis; 3 m allows for buildings and trees", 0.01, 1e4),
+    Parameter("gps_dop_sigma_m", float, 2.0, _NEW,
+              "position uncertainty per unit of a GPS fix's dilution of precision (GoPro GPMF: GPSP / "
+              "100), metres",
+              "sigma = DOP x the user equivalent range error (Kaplan and Hegarty, Understanding GPS); "
+              "single-frequency receivers' range error is about 2 m (signal under 1 m, plus "
+              "atmosphere and multipath)", 0.01, 1e3),
+    Parameter("gps_spacing_m", float, 5.0, _NEW,
+              "GPS position factors in the pose graph: at its key nodes and at least one every this "
+              "many metres along the path (fewer factors keep long recordings fast)",
+              "about the spread of one fix (gps_sigma_m): fixes closer together repeat one slowly "
+              "changing error; 100,000 nodes 1 m apart make 20,000 factors", 0.1, 1e5),
+    Parameter("gps_scale_span_m", float, 25.0, _NEW,
+              "without odometry, the image steps' length in metres is the GPS distance over the "
+              "image path's own, measured between GPS fixes at least this far apart",
+              "the distance between two fixes of 3 m sigma each is uncertain by sqrt(2) x 3 / 25 = "
+              "17 %, inside the image steps' own 30 % (step_sigma_steps)", 1.0, 1e5),
 )
 BY_NAME = {p.name: p for p in PARAMETERS}
 

@@ -301,12 +301,16 @@ def descriptor_defaults(descs: Descriptors) -> dict:
 
 
 def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str = "", *,
-              row_starts: Sequence[int] = (0,), sessions: Optional[Sequence[str]] = None):
+              row_starts: Sequence[int] = (0,), sessions: Optional[Sequence[str]] = None,
+              metric=None):
     """Nodes and loops from descriptors: cheap, re-run on every parameter change.
 
     Several recordings (``engine.site``): ``descs`` concatenated, ``row_starts`` the first row
     of each and ``sessions`` their names; nodes are made per recording, the thresholds
-    calibrated on the whole set, and the pose graph treats each recording as its own chain."""
+    calibrated on the whole set, and the pose graph treats each recording as its own chain.
+    ``metric``: the recording's odometry and GPS per descriptor row (``engine.metric.Metric``;
+    default: what ``engine.run`` read for these descriptors, ``descs.cache["metric"]``), which
+    put the ``verified`` pose graph in metres; without it the map is image-only."""
     from .graph import TopoMap
     from .loops import detect_loops
     from .nodes import make_nodes
@@ -336,6 +340,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     frame_width = int(descs.meta.get("frame_width", 0))
     poses = None
     steps = None
+    at_nodes = None
     if p.method == "verified":
         from .loops.geometry import PairGeometry
         from .loops.pose_graph import step_measurements
@@ -343,14 +348,18 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
 
         cache = descs.cache.setdefault(("nodes", p.node_sim_th), {})
         features = getattr(descs, "features", None)
+        metric = metric if metric is not None else descs.cache.get("metric")
+        if metric is not None and not metric.empty and metric.rows != len(descs):
+            raise InputError(f"metric data for {metric.rows} frames given with {len(descs)} descriptors")
+        at_nodes = None if metric is None or metric.empty else metric.take(node_rows)
         found = verified(descs.vectors[node_rows], p, node_rows=node_rows,
                          features=features, columns=columns,
                          shifts=descs.shifts[node_rows], frame_width=frame_width,
-                         cache=cache, chain_starts=tuple(chain_starts.tolist()))
+                         cache=cache, chain_starts=tuple(chain_starts.tolist()), metric=at_nodes)
         loops, poses = found.loops, found.poses
         if poses is not None:   # the step factors, for the g2o export (fits already cached)
             fitted = PairGeometry(features, node_rows, descs.shifts[node_rows], frame_width, columns, cache).steps(p)
-            steps = None if fitted is None else step_measurements(fitted, chain_starts, p)
+            steps = None if fitted is None else step_measurements(fitted, chain_starts, p, at_nodes)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}
@@ -359,6 +368,9 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     projection = (descs.meta.get("projection") or {}).get("name", "equirect")
     if projection != "equirect":                     # converted to equirectangular as read
         extra["projection"] = projection
+    if poses is not None and at_nodes is not None:   # the pose graph was solved in metres, from these
+        extra["metric"] = "+".join(k for k, v in (("odometry", at_nodes.odometry), ("gps", at_nodes.gps))
+                                   if v is not None)
     topomap = TopoMap.build(descs, node_rows, loops, p, source=source or descs.meta.get("source", ""),
                             extra_meta=extra, sessions=node_sessions)
     if poses is not None:   # the pose graph's estimate, until ground truth or GPS replaces it

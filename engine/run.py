@@ -9,8 +9,12 @@ The command line (``panotopo map``), the desktop app's worker and the benchmarks
 2. thresholds the paper's thresholds calibrated from the recording, for those not set
               (``auto_thresholds``; ``engine.calibrate.paper_thresholds``);
 3. map        ``engine.pipeline.build_map``: nodes and loops;
+   (metric)   with ``metric``, the recording's own odometry (a bag's Odometry / PoseStamped
+              topic) and GPS (EXIF, GPMF) at the descriptor stamps (``engine.metric``): the
+              pose graph of ``verified`` is then solved in metres; none of it is ground truth;
 4. position   node positions from ground-truth ``poses`` (given, or the recording's own:
-              a geotagged photo folder's EXIF GPS) where known;
+              a geotagged photo folder's EXIF GPS) where known, else the pose graph's
+              estimate (graph ``positions`` "estimated", never read as ground truth);
 5. evaluate   ``engine.evaluate.evaluate`` against those poses, where known and asked.
 
 Several recordings (a list or tuple ``source``: recordings, .npz, site maps) are one site:
@@ -37,17 +41,22 @@ class RunResult:
     poses: Optional[Poses] = None          # what positioned the nodes, when known
     evaluation: Optional[object] = None    # engine.evaluate.Evaluation, when poses and asked
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)      # what was used (e.g. which odometry topic), one line each
+    metric: Optional[object] = None        # engine.metric.Metric the pose graph used, per descriptor row
 
 
 def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), *, settings=None,
         poses: Optional[Poses] = None, recording_poses: bool = False, auto_thresholds: bool = False,
         evaluate: bool = False, eval_nn: Optional[int] = None, progress=None, cancel=None,
-        cache=None, poses_name: str = "poses") -> RunResult:
+        cache=None, poses_name: str = "poses", metric: bool = False,
+        odom_topic: Optional[str] = None) -> RunResult:
     """Stages 1-5 (module notes). ``settings`` is an ``engine.pipeline.DescribeSettings``, the
     user's: its ``shift`` and the describe options the method asks for follow the method
     (``engine.pipeline.method_settings``); ``recording_poses`` looks for positions in the
     recording itself when ``poses`` is None; ``eval_nn`` overrides the map's temporal
-    window for evaluation; ``poses_name`` names the poses in an error."""
+    window for evaluation; ``poses_name`` names the poses in an error. ``metric``: the
+    recording's own odometry and GPS become factors of the pose graph (``odom_topic``: the
+    bag's odometry topic; None: its one Odometry / PoseStamped topic; "none": no odometry)."""
     from .pipeline import build_map, describe, is_descriptor_file, method_settings
     from .progress import check
 
@@ -68,15 +77,34 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
         found = paper_thresholds(descs.vectors, params.neighbor_node_num)
         params = replace(params, **{k: v for k, v in found.items() if getattr(params, k) is None})
     check(cancel)
-    if progress is not None:
-        progress(0, 0, "building the map")
-    topomap = build_map(descs, params, source=name)                                # 3
-    check(cancel)
-    if poses is None and recording_poses and not isinstance(source, Descriptors):   # 4
+    recorded = None
+    if not isinstance(source, Descriptors) and ((poses is None and recording_poses) or metric):
         from .sources import recording_poses as own_poses
 
-        poses, found_warnings = own_poses(Path(source), interval=settings.interval)
-        warnings.extend(found_warnings)
+        recorded, own_warnings = own_poses(Path(source), interval=settings.interval)
+        warnings.extend(own_warnings)
+    notes: list[str] = []
+    used = None
+    descs.cache.pop("metric", None)   # build_map's default: what was read here for these descriptors
+    if metric and not isinstance(source, Descriptors):                             # (metric)
+        from .metric import read_metric
+
+        used = read_metric(Path(source), descs.stamps, gps=recorded, odom_topic=odom_topic)
+        notes.extend(used.notes)
+        warnings.extend(used.warnings)
+        used = None if used.empty else used
+        if used is not None:
+            descs.cache["metric"] = used
+    elif odom_topic is not None:
+        from .errors import InputError
+
+        raise InputError(f"an odometry topic ({odom_topic}) needs a bag read for the pose graph's metric data")
+    if progress is not None:
+        progress(0, 0, "building the map")
+    topomap = build_map(descs, params, source=name, metric=used)                  # 3
+    check(cancel)
+    if poses is None and recording_poses and not isinstance(source, Descriptors):   # 4
+        poses = recorded
         if poses is not None:   # EXIF or GPMF fixes: a track that misses the nodes is a warning
             from .errors import InputError
             from .validate import poses_cover
@@ -99,7 +127,7 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
         from .evaluate import evaluate as score
 
         evaluation = score(topomap, poses, neighbor_node_num=eval_nn)
-    return RunResult(descs, topomap, poses, evaluation, warnings)
+    return RunResult(descs, topomap, poses, evaluation, warnings, notes, used)
 
 
 def _run_site(sources: list, params: MapParams, *, settings, poses, auto_thresholds: bool, evaluate: bool,

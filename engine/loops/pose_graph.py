@@ -14,17 +14,32 @@ Only the nodes the loops touch matter to the solution: the steps between two of 
 composed into one factor with its propagated covariance, so 100,000 nodes cost what their
 loops cost. The other nodes' poses are then read off the path, the mismatch at each key node
 spread along the stretch. Several recordings are several chains joined only by loops.
+
+Metric factors (``engine.metric.Metric``, where the recording has them): the graph is then
+solved in metres. Odometry gives the step factors (the relative pose between consecutive
+nodes, its sigma ``odom_sigma_rate`` of the step's length and ``odom_turn_sigma_deg`` per
+metre); without odometry the image steps are scaled to metres by the GPS distance over the
+image path's own (``gps_scale_span_m``). GPS gives position factors (GTSAM's
+``PoseTranslationPrior2D``: the translation alone, heading free, with the exact Jacobian; a
+Pose2 prior with a huge heading sigma is not that, its error mixes heading into position) at
+the key nodes and at least one every ``gps_spacing_m`` metres, sigma from the fix's DOP
+(``gps_dop_sigma_m``) or ``gps_sigma_m``. A loop's sigma in metres is ``loop_sigma_steps``
+times the median metric step. Without metric data nothing of this runs: the image-only graph
+is the one it always was.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import TYPE_CHECKING, Optional, Sequence
 
 import numpy as np
 
 from ..params import MapParams
 from .pairs import Steps
+
+if TYPE_CHECKING:
+    from ..metric import Metric
 
 # A turn or position this uncertain says nothing (a weak factor): the chain stays joined.
 _FREE_TURN = 1e3
@@ -34,6 +49,9 @@ _FREE_STEP = 1e3
 # defaults Levenberg-Marquardt took 45 iterations per solve (20,000 nodes, 800 loops: 23 s).
 _BASE_ITERATIONS = 15
 _RELATIVE_TOL = 1e-3
+# An odometry step shorter than this (metres) is as uncertain as one this long (a turn on the
+# spot or a stop still has noise): odom_sigma_rate and odom_turn_sigma_deg apply to it.
+_ODOM_MIN_STEP_M = 0.1
 
 
 @dataclass
@@ -53,6 +71,7 @@ class Solution:
     kept: np.ndarray            # bool per loop: the solution holds it
     outvoted_steps: np.ndarray  # indices i of ambiguous steps (i, i + 1) the loops outvoted
     hops: object = None         # callable (a, b) -> node steps along the solved graph
+    unit: float = 1.0           # length of poses' x, y per node step: 1, or metres (metric factors)
 
 
 def _step_motion(steps: Steps, chain_starts: np.ndarray, params: MapParams):
@@ -119,23 +138,34 @@ def _apply(p: np.ndarray, rel: np.ndarray) -> np.ndarray:
 
 
 def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
-          chain_starts: Sequence[int] = (0,), extra_keys: Sequence[int] = ()) -> Solution:
+          chain_starts: Sequence[int] = (0,), extra_keys: Sequence[int] = (),
+          metric: Optional["Metric"] = None) -> Solution:
     """Stage 7: the robust pose graph of ``m`` nodes (chains starting at ``chain_starts``;
     ``steps`` has one entry per consecutive node pair, those across chains unused), with
     ``loops`` robust. ``extra_keys``: nodes whose distances along the solved graph will be
-    asked (``Solution.hops``)."""
+    asked (``Solution.hops``). ``metric``: the nodes' odometry and GPS (module notes), or
+    None: image-only, in node steps."""
     import gtsam
 
     chain_starts = np.unique(np.concatenate([[0], np.asarray(chain_starts, np.int64)]))
+    metric = None if metric is None or metric.empty else metric
     dx, dy, dt, sxy, st = _step_motion(steps, chain_starts, params)
     amb = np.asarray(steps.ambiguous, bool).copy()
+    weak = np.ones(dx.size)       # position sigma of the weak factor beside an ambiguous step
+    unit = 1.0
+    if metric is not None:
+        dx, dy, dt, sxy, st, amb, weak, unit = _metric_steps(dx, dy, dt, sxy, st, amb, metric, chain_starts, params, m)
     cross = chain_starts[chain_starts > 0] - 1                          # steps between chains
     amb[cross] = False
     chain_of = np.searchsorted(chain_starts, np.arange(m), side="right") - 1
+    gps_nodes = np.zeros(0, np.int64) if metric is None else _gps_nodes(metric, dx, dy, chain_starts, params, m)
     keys = np.unique(np.concatenate([chain_starts, chain_starts[1:] - 1, [m - 1], loops.a, loops.b,
                                      np.flatnonzero(amb), np.flatnonzero(amb) + 1,
-                                     np.asarray(extra_keys, np.int64)])).astype(np.int64)
+                                     np.asarray(extra_keys, np.int64), gps_nodes])).astype(np.int64)
     dr = _dead_reckoning(dx, dy, dt, m, chain_starts)
+    has_gps = np.zeros(chain_starts.size, bool)
+    if metric is not None:
+        dr, has_gps = _anchored(dr, metric, chain_starts, m)
 
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
     inliers: list[int] = []
@@ -147,9 +177,10 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
             inliers.append(graph.size() - 1)
         return graph.size() - 1
 
-    for c, start in enumerate(chain_starts):   # each chain a prior; the first fixes the map
-        sigma = 1e-3 if c == 0 else _FREE_STEP
-        add(gtsam.PriorFactorPose2(int(start), gtsam.Pose2(0.0, 0.0, 0.0),
+    for c, start in enumerate(chain_starts):   # each chain a prior; the first fixes the map (unless GPS does)
+        sigma = 1e-3 if c == 0 and not has_gps[c] else _FREE_STEP
+        p = dr[start]
+        add(gtsam.PriorFactorPose2(int(start), gtsam.Pose2(float(p[0]), float(p[1]), float(p[2])),
                                    gtsam.noiseModel.Isotropic.Sigma(3, sigma)), True)
     for k in keys:
         p = dr[k]
@@ -162,18 +193,24 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
         if j - i == 1 and amb[i]:
             noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sxy[i], sxy[i], st[i]]))
             robust_steps[i] = add(gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(dx[i], dy[i], dt[i]), noise), False)
-            weak = gtsam.noiseModel.Isotropic.Sigmas(np.array([1.0, 1.0, _FREE_TURN]))
-            add(gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(0.0, 0.0, 0.0), weak), True)
+            loose = gtsam.noiseModel.Isotropic.Sigmas(np.array([weak[i], weak[i], _FREE_TURN]))
+            add(gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(0.0, 0.0, 0.0), loose), True)
             continue
         rel, cov = _compose(dx[i:j], dy[i:j], dt[i:j], sxy[i:j], st[i:j])
         add(gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*rel),
                                      gtsam.noiseModel.Gaussian.Covariance(cov + 1e-9 * np.eye(3))), True)
     loop_factors = []
+    loop_sigma = params.loop_sigma_steps * unit
     for a, b, yaw in zip(loops.a.tolist(), loops.b.tolist(), loops.yaw.tolist()):
         turn = np.radians(yaw) if np.isfinite(yaw) else 0.0
         st_loop = np.radians(params.loop_turn_sigma_deg) if np.isfinite(yaw) else _FREE_TURN
-        noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([params.loop_sigma_steps, params.loop_sigma_steps, st_loop]))
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([loop_sigma, loop_sigma, st_loop]))
         loop_factors.append(add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(0.0, 0.0, turn), noise), False))
+    if metric is not None and metric.gps is not None:   # position factors, heading free
+        sigma_gps = metric.gps_sigma(params.gps_sigma_m, params.gps_dop_sigma_m)
+        for k in keys[np.isfinite(metric.gps[keys]).all(axis=1)].tolist():
+            add(gtsam.PoseTranslationPrior2D(int(k), np.asarray(metric.gps[k], np.float64),
+                                             gtsam.noiseModel.Isotropic.Sigma(2, float(sigma_gps[k]))), True)
 
     if loop_factors or robust_steps:
         base = gtsam.LevenbergMarquardtParams()
@@ -195,7 +232,129 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
     outvoted = np.asarray(sorted(i for i, f in robust_steps.items() if weights[f] <= 0.5), np.int64)
     hops = _hops(keys, segments, loops, kept)
     poses[:, 2] = np.degrees((poses[:, 2] + np.pi) % (2 * np.pi) - np.pi)
-    return Solution(poses=poses, kept=kept, outvoted_steps=outvoted, hops=hops)
+    return Solution(poses=poses, kept=kept, outvoted_steps=outvoted, hops=hops, unit=unit)
+
+
+def _metric_steps(dx, dy, dt, sxy, st, amb, metric: "Metric", chain_starts: np.ndarray, params: MapParams, m: int):
+    """The step factors in metres: (dx, dy, dtheta, sigma_xy, sigma_theta, ambiguous, weak
+    sigma, metres per node step). Odometry's relative pose where both nodes have it (never
+    ambiguous); elsewhere the image step scaled by its metric length (``_gps_scale``, or the
+    median odometry step)."""
+    n = dx.size
+    scale = np.ones(n)
+    odo = np.zeros(n, bool)
+    if metric.odometry is not None and n:
+        o = np.asarray(metric.odometry, np.float64)
+        rel = _relative(o[:-1], o[1:])
+        rel[:, 2] = (rel[:, 2] + np.pi) % (2 * np.pi) - np.pi
+        odo = np.isfinite(rel).all(axis=1)
+        odo[chain_starts[chain_starts > 0] - 1] = False
+        length = np.hypot(rel[:, 0], rel[:, 1])
+        moving = odo & (length >= _ODOM_MIN_STEP_M)
+        scale[:] = float(np.median(length[moving])) if moving.any() else _ODOM_MIN_STEP_M
+    elif metric.gps is not None:
+        scale = _gps_scale(dx, dy, dt, metric.gps, chain_starts, params, m)
+    dx, dy, sxy, weak = dx * scale, dy * scale, sxy * scale, scale.copy()
+    st, amb = st.copy(), amb.copy()
+    if odo.any():
+        base = np.maximum(length[odo], _ODOM_MIN_STEP_M)
+        dx[odo], dy[odo], dt = rel[odo, 0], rel[odo, 1], np.where(odo, rel[:, 2], dt)
+        sxy[odo] = params.odom_sigma_rate * base
+        st[odo] = np.radians(params.odom_turn_sigma_deg) * base
+        amb[odo] = False
+    length = np.hypot(dx, dy)
+    moving = length > 0
+    unit = float(np.median(length[moving])) if moving.any() else 1.0
+    return dx, dy, dt, sxy, st, amb, weak, unit
+
+
+def _gps_scale(dx, dy, dt, gps: np.ndarray, chain_starts: np.ndarray, params: MapParams, m: int) -> np.ndarray:
+    """Metres per node step of every image step. Each chain's image path (dead-reckoned in node
+    steps) is fitted to its GPS fixes by a similarity (scale, turn, shift; least squares), first
+    whole, then in stretches of about ``gps_scale_span_m`` cut along the image path (not where
+    the fixes happen to lie: cutting at noisy fixes far enough apart picks the noise that makes
+    them far); a stretch's scale more than 3 times off the chain's, or with fixes too close
+    together to say, is the chain's. A chain with fewer than two fixes keeps 1."""
+    scale = np.ones(dx.size)
+    dr = _dead_reckoning(dx, dy, dt, m, chain_starts)
+    have = np.isfinite(gps).all(axis=1)
+    bounds = list(chain_starts) + [m]
+    length = np.hypot(dx, dy)
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        g = s + np.flatnonzero(have[s:e])
+        whole = _similarity_scale(dr[g, :2], gps[g])
+        if whole is None:
+            continue
+        along = np.concatenate([[0.0], np.cumsum(length[s:e - 1])]) * whole   # metres, roughly
+        piece = np.floor(along / params.gps_scale_span_m).astype(np.int64)      # stretch of each node
+        step_scale = np.full(e - 1 - s, whole)
+        for k in np.unique(piece).tolist():
+            nodes = s + np.flatnonzero(piece == k)
+            nodes = np.arange(nodes[0], min(nodes[-1] + 2, e))                  # and the next stretch's first
+            inside = nodes[have[nodes]]
+            found = _similarity_scale(dr[inside, :2], gps[inside])
+            if found is not None and whole / 3 <= found <= 3 * whole:
+                step_scale[nodes[:-1] - s] = found
+        scale[s:e - 1] = step_scale
+    return scale
+
+
+def _similarity_scale(p: np.ndarray, q: np.ndarray) -> Optional[float]:
+    """The scale of the similarity that maps points ``p`` onto ``q`` best (least squares in
+    ``q``), or None when ``p`` spans less than a node step."""
+    if p.shape[0] < 2:
+        return None
+    pc = (p[:, 0] - p[:, 0].mean()) + 1j * (p[:, 1] - p[:, 1].mean())
+    qc = (q[:, 0] - q[:, 0].mean()) + 1j * (q[:, 1] - q[:, 1].mean())
+    spread = float(np.sum(np.abs(pc) ** 2))
+    if spread < 1.0 or np.ptp(p[:, 0]) ** 2 + np.ptp(p[:, 1]) ** 2 < 1.0:
+        return None
+    return float(np.abs(np.sum(np.conj(pc) * qc)) / spread)
+
+
+def _gps_nodes(metric: "Metric", dx, dy, chain_starts: np.ndarray, params: MapParams, m: int) -> np.ndarray:
+    """Nodes that get a GPS factor besides the key nodes that have a fix: along each chain the
+    first node with a fix in every ``gps_spacing_m`` of metric path."""
+    if metric.gps is None:
+        return np.zeros(0, np.int64)
+    have = np.isfinite(metric.gps).all(axis=1)
+    out = []
+    bounds = list(chain_starts) + [m]
+    length = np.hypot(dx, dy)
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        along = np.concatenate([[0.0], np.cumsum(length[s:e - 1])])
+        g = np.flatnonzero(have[s:e])
+        if g.size == 0:
+            continue
+        bins = np.floor(along[g] / params.gps_spacing_m)
+        first = np.concatenate([[True], bins[1:] != bins[:-1]])
+        out.append(s + g[first])
+    return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
+
+
+def _anchored(dr: np.ndarray, metric: "Metric", chain_starts: np.ndarray, m: int):
+    """(initial poses, chain has GPS): each chain's dead reckoning moved onto its GPS fixes
+    (the rotation and translation that fit best) or, without them, onto its odometry's first
+    pose; the solution starts there (a pose graph far from the answer in heading may not find it)."""
+    dr = dr.copy()
+    has_gps = np.zeros(chain_starts.size, bool)
+    bounds = list(chain_starts) + [m]
+    have = np.isfinite(metric.gps).all(axis=1) if metric.gps is not None else np.zeros(m, bool)
+    for c, (s, e) in enumerate(zip(bounds[:-1], bounds[1:])):
+        g = s + np.flatnonzero(have[s:e])
+        if g.size:
+            has_gps[c] = True
+            p, q = dr[g, :2], np.asarray(metric.gps[g], np.float64)
+            pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
+            turn = float(np.arctan2(np.sum(pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0]),
+                                    np.sum(pc[:, 0] * qc[:, 0] + pc[:, 1] * qc[:, 1]))) if g.size > 1 else 0.0
+            rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+            shift = q.mean(axis=0) - rot @ p.mean(axis=0)
+            dr[s:e, :2] = dr[s:e, :2] @ rot.T + shift
+            dr[s:e, 2] += turn
+        elif metric.odometry is not None and np.isfinite(metric.odometry[s]).all():
+            dr[s:e] = _apply(np.asarray(metric.odometry[s], np.float64), dr[s:e])
+    return dr, has_gps
 
 
 def _spread(dr: np.ndarray, keys: np.ndarray, solved: np.ndarray, segments, m: int) -> np.ndarray:
@@ -242,10 +401,16 @@ def _hops(keys: np.ndarray, segments, loops: Loops, kept: np.ndarray):
     return hops
 
 
-def step_measurements(steps: Steps, chain_starts: Sequence[int], params: MapParams):
+def step_measurements(steps: Steps, chain_starts: Sequence[int], params: MapParams,
+                      metric: Optional["Metric"] = None):
     """The step factors ``solve`` uses, for exports (g2o): (dx, dy, dtheta, sigma_xy,
     sigma_theta), one entry per consecutive node pair (i, i + 1): the relative pose in node
-    i's frame (x, y in node steps, theta in radians) and its standard deviations. A pair
-    across ``chain_starts`` (two recordings) is no factor; its entry means nothing."""
+    i's frame (x, y in node steps, or metres with ``metric``; theta in radians) and its
+    standard deviations. A pair across ``chain_starts`` (two recordings) is no factor; its
+    entry means nothing."""
     starts = np.unique(np.concatenate([[0], np.asarray(chain_starts, np.int64)]))
-    return _step_motion(steps, starts, params)
+    motion = _step_motion(steps, starts, params)
+    if metric is None or metric.empty:
+        return motion
+    m = motion[0].size + 1
+    return _metric_steps(*motion, np.asarray(steps.ambiguous, bool), metric, starts, params, m)[:5]

@@ -36,7 +36,8 @@ from .tiers import nearest, tiers
 @dataclass
 class LoopResult:
     """What ``detect_loops`` finds: the loops (sorted by (a, b)) and, where the pose graph was
-    solved, every node's estimated pose (x, y in node steps, heading in degrees)."""
+    solved, every node's estimated pose (x, y in node steps, or metres with metric data;
+    heading in degrees)."""
 
     loops: list
     poses: Optional[np.ndarray] = None
@@ -44,18 +45,19 @@ class LoopResult:
 
 def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarray, features=None,
                  columns=None, shifts=None, frame_width: int = 0, cache: Optional[dict] = None,
-                 chain_starts: Sequence[int] = (0,)) -> LoopResult:
+                 chain_starts: Sequence[int] = (0,), metric=None) -> LoopResult:
     """Stages 1-7 on node descriptors ``vectors`` (m, d). ``node_rows`` are the nodes' rows in
     the recording (features are per row); without ``features`` there is no geometry and no
     pose graph, and automatic loops need score and support. ``chain_starts``: the first node
-    of every recording (several recordings are chains joined only by loops)."""
+    of every recording (several recordings are chains joined only by loops). ``metric``: the
+    nodes' odometry and GPS (``engine.metric.Metric``), the pose graph then in metres."""
     cache = {} if cache is None else cache
     v = np.asarray(vectors, np.float32)
     m = v.shape[0]
     shifts = np.zeros(m, np.int64) if shifts is None else np.asarray(shifts, np.int64)
     geometry = PairGeometry(features, node_rows, shifts, frame_width, columns, cache)
     if m <= params.neighbor_node_num + 1:
-        return LoopResult([], _path_only(geometry, params, m, chain_starts))
+        return LoopResult([], _path_only(geometry, params, m, chain_starts, metric))
     pairs = with_support(v, candidates(v, params, cache), params, cache)              # 1, 2
     floor = params.candidate_z - params.geometry_margin_z
     pairs = pairs.take((pairs.score >= floor) | (np.nan_to_num(pairs.support, nan=-np.inf) >= floor))
@@ -65,7 +67,7 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     pairs = geometry.measure(pairs, params)                                         # 4
     status, rule = tiers(pairs, params)                                             # 5
     pairs, status, rule = nearest(pairs, status, rule, set_aside, v, geometry, params, cache)   # 6
-    status, reason, closure, poses = consistent(pairs, status, geometry, params, m, chain_starts)  # 7
+    status, reason, closure, poses = consistent(pairs, status, geometry, params, m, chain_starts, metric)  # 7
     out = [LoopCandidate(a=int(pairs.a[i]), b=int(pairs.b[i]), similarity=float(pairs.cosine[i]), window_count=0,
                          yaw=float(pairs.yaw[i]) if np.isfinite(pairs.yaw[i]) else None,
                          score=float(pairs.score[i]), status=str(status[i]),
@@ -75,22 +77,24 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     return LoopResult(out, poses)
 
 
-def _path_only(geometry: PairGeometry, params: MapParams, m: int, chain_starts) -> Optional[np.ndarray]:
+def _path_only(geometry: PairGeometry, params: MapParams, m: int, chain_starts, metric=None) -> Optional[np.ndarray]:
     steps = geometry.steps(params)
     if steps is None:
         return None
     empty = np.zeros(0, np.int64)
-    return pose_graph.solve(m, steps, pose_graph.Loops(empty, empty, np.zeros(0)), params, chain_starts).poses
+    return pose_graph.solve(m, steps, pose_graph.Loops(empty, empty, np.zeros(0)), params, chain_starts,
+                            metric=metric).poses
 
 
 def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params: MapParams, m: int,
-               chain_starts) -> tuple:
+               chain_starts, metric=None) -> tuple:
     """Stage 7: (status, reason, closure, poses). The automatic loops and the steps make one
     robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a candidate
     with the reason; a candidate whose ends the solved map puts further apart than
     ``closure_slack`` + ``closure_rate`` per step of the graph between them is dropped (weak
     evidence, and the map against it). ``closure``: the ends' distance in the solved map,
-    node steps (NaN without geometry)."""
+    node steps (NaN without geometry; with ``metric`` the map is in metres, and the distance
+    is divided by its median step)."""
     n = len(pairs)
     reason = np.full(n, "", dtype=object)
     closure = np.full(n, np.nan)
@@ -100,9 +104,9 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     auto = np.flatnonzero(status == Status.AUTO.value)
     loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto])
     solution = pose_graph.solve(m, steps, loops, params, chain_starts,
-                                extra_keys=np.concatenate([pairs.a, pairs.b]))
+                                extra_keys=np.concatenate([pairs.a, pairs.b]), metric=metric)
     xy = solution.poses[:, :2]
-    closure = np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1)
+    closure = np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1) / solution.unit
     status = status.copy()
     rejected = auto[~solution.kept]
     status[rejected] = Status.CANDIDATE.value
