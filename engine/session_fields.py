@@ -73,9 +73,19 @@ def check_version(value: Any, newest: int) -> int:
     return value
 
 
+SESSION_NAME_MAX = 4096   # characters of a recording's name in a site's decisions
+
+
+def _session_name(value: Any, name: str) -> str:
+    if not isinstance(value, str) or not value or len(value) > SESSION_NAME_MAX:
+        raise _fail(name, "a recording's name", value)
+    return value
+
+
 def check_decisions(value: Any, name: str = "decisions") -> dict:
     """``TopoMap.decisions()`` data: loops (frames, status), manual (frames, yaw),
-    labels (frame, label). Frames must be integers >= 0; whether they fall inside the
+    labels (frame, label); a site's items also name their recordings (loops ``sessions``,
+    two names; labels ``session``). Frames must be integers >= 0; whether they fall inside the
     recording is the map's business (``TopoMap.apply_decisions`` keeps the ones outside
     as unapplied rather than snapping them to the nearest node)."""
     dec = _mapping(value, name)
@@ -91,10 +101,18 @@ def check_decisions(value: Any, name: str = "decisions") -> dict:
                 label = item.get("label")
                 if not isinstance(label, str) or len(label) > LABEL_MAX:
                     raise _fail(f"{where}.label", f"a text of at most {LABEL_MAX} characters", label)
-                items.append({"frame": _frame(item.get("frame"), f"{where}.frame"), "label": label})
+                clean = {"frame": _frame(item.get("frame"), f"{where}.frame"), "label": label}
+                if item.get("session") is not None:
+                    clean["session"] = _session_name(item["session"], f"{where}.session")
+                items.append(clean)
                 continue
             clean = dict(item)
             clean["frames"] = _frames(item.get("frames"), f"{where}.frames")
+            if item.get("sessions") is not None:
+                names = item["sessions"]
+                if not isinstance(names, list) or len(names) != 2:
+                    raise _fail(f"{where}.sessions", "two recording names", names)
+                clean["sessions"] = [_session_name(n, f"{where}.sessions") for n in names]
             if key == "loops":
                 if item.get("status") not in STATUSES:
                     raise _fail(f"{where}.status", f"one of {', '.join(STATUSES)}", item.get("status"))

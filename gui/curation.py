@@ -101,7 +101,9 @@ class Curation(QObject):
 
     def _ctrl_click_loop(self, a: int, b: int) -> None:
         """Ctrl+click in the graph: a manual loop from the current node, after a question (defect 10)."""
-        if abs(a - b) < 2:
+        same_recording = self.w.doc.site is None or (
+            self.w.doc.node_data(self.w.doc.node_id(a)).get("session") == self.w.doc.node_data(self.w.doc.node_id(b)).get("session"))
+        if abs(a - b) < 2 and same_recording:
             self.w.statusBar().showMessage("Neighbouring nodes are already joined by the path", 5000)
             return
         lo, hi = min(a, b), max(a, b)
@@ -136,11 +138,11 @@ class Curation(QObject):
         if not self.w.doc.has_map:
             return
         k = self.w.doc.node_at_or_before(max(self.w.frame_viewer.current_frame, 0))
-        frame = int(self.w.doc.node_data(self.w.doc.node_id(k))["frame"])
+        frame = self.w.doc.node_place(k)
         old = self.w.doc.label_of_frame(frame)
         dialog = QInputDialog(self.w)
         dialog.setWindowTitle("Name this place")
-        dialog.setLabelText(f"Place name of node n{k} (frame {frame}):")
+        dialog.setLabelText(f"Place name of node n{k} ({self.w.doc.place_text(frame)}):")
         dialog.setTextValue(old)
         field = dialog.findChild(QLineEdit)
         if field is not None:
@@ -185,7 +187,7 @@ class Curation(QObject):
         self.w.frame_viewer.show_frame(key[0])
 
     def show_node(self, k: int) -> None:
-        self.w.frame_viewer.show_frame(int(self.w.doc.node_data(self.w.doc.node_id(k))["frame"]))
+        self.w.frame_viewer.show_frame(self.w.doc.node_place(k))
 
     def _sync_current_node(self) -> None:
         self._frame_changed(self.w.frame_viewer.current_frame)

@@ -31,6 +31,7 @@ class FrameCache:
         self.capacity = capacity
         self._items: "OrderedDict[int, ShownFrame]" = OrderedDict()
         self.known_shifts: dict[int, int] = {}   # source frame -> shift from the descriptors
+        self.known_width = 0     # the frame width those shifts count in (0: each frame's own)
         self._lock = threading.RLock()
 
     def set_source(self, source) -> None:
@@ -69,6 +70,9 @@ class FrameCache:
         except InputError:
             return None
         shift = self.known_shifts.get(int(index))
+        width = int(frame.rgb.shape[1])
+        if shift is not None and self.known_width and self.known_width != width:   # another recording's width
+            shift = int(round(shift * width / self.known_width)) % width
         if shift is None:
             shift = int(canonical_shift(frame.rgb))
         item = ShownFrame(int(frame.index), float(frame.stamp), frame.rgb, shift)

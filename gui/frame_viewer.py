@@ -257,12 +257,19 @@ class FrameViewer(QWidget):
         item = self.cache.get(self._current)
         if item is None:
             return
-        text = f"<b>frame {item.index}</b> / {self.cache.frame_count - 1} &nbsp; · &nbsp; t = {item.stamp:.2f} s"
+        site = self.doc.site
+        if site is None:
+            text = f"<b>frame {item.index}</b> / {self.cache.frame_count - 1} &nbsp; · &nbsp; t = {item.stamp:.2f} s"
+        else:   # a site: the recording the frame belongs to, and its own frame number
+            name, frame = site.local(item.index)
+            first, end = site.span_of(name)
+            text = (f"<b>{name}</b> &nbsp; <b>frame {frame}</b> / {end - first - 1} &nbsp; · &nbsp; "
+                    f"t = {item.stamp:.2f} s")
         k = self.doc.node_at_or_before(item.index)
         if k is not None:
             node = self.doc.node_id(k)
             data = self.doc.node_data(node)
-            exact = int(data["frame"]) == item.index
+            exact = self.doc.node_place(k) == item.index
             text += f" &nbsp; · &nbsp; node <b>{node}</b>" + ("" if exact else f" (since frame {data['frame']})")
             if data.get("label"):
                 text += f" &nbsp; · &nbsp; “{data['label']}”"

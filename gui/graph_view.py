@@ -6,6 +6,10 @@ the map as decided (``gui.model.layout``). Every loop is a curve that bulges awa
 A strip above the plot (never over the path) shows one toggle per status with its
 count. Click a node: jump to its frame. Click a loop: select it. Ctrl+click a
 second node: propose a manual loop between it and the current node.
+
+A site (several recordings): each recording's path and nodes in its own colour
+(``style.recording_color``), no path arc from one recording to the next, a start and an
+end marker per recording, and a legend strip naming each recording in its colour.
 """
 
 from __future__ import annotations
@@ -15,14 +19,14 @@ from typing import Optional
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QSizePolicy, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .background import Worker
-from .model.layout import decided_graph, path_layout, solve_layout
+from .model.layout import chain_breaks, decided_graph, path_layout, path_pairs, solve_layout
 from .loop_arcs import distance_to_curves, loop_curves, nan_joined
 from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR, STATUS_COLORS,
-                    STATUS_LABELS, STATUS_ORDER, status_pen)
+                    STATUS_LABELS, STATUS_ORDER, recording_color, status_pen)
 
 CLICK_RADIUS_PX = 9
 
@@ -58,6 +62,7 @@ class GraphView(QWidget):
         self.plot.addItem(self.selected_item)
         self.sequential_item = pg.PlotDataItem(pen=pg.mkPen(SEQUENTIAL_COLOR, width=1.5), name="path (sequential)")
         self.plot.addItem(self.sequential_item)
+        self.recording_items: list[pg.PlotDataItem] = []   # a site: one path per recording, in its colour
         self.loop_items: dict[str, pg.PlotDataItem] = {}
         self.toggles: dict[str, QCheckBox] = {}
         for status in reversed(STATUS_ORDER):  # rejected drawn first, below the others
@@ -97,10 +102,19 @@ class GraphView(QWidget):
         for box in self.toggles.values():
             strip.addWidget(box)
         strip.addStretch(1)
+        # A site: which colour is which recording (wraps on a narrow view; hidden for one recording).
+        self.legend = QLabel()
+        self.legend.setTextFormat(Qt.RichText)
+        self.legend.setWordWrap(True)
+        self.legend.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
+        self.legend.setContentsMargins(6, 0, 4, 2)
+        self.legend.setToolTip("The recordings of the site: each one's path and nodes are drawn in its colour")
+        self.legend.setVisible(False)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.setSpacing(0)
         layout.addWidget(self.toggle_strip)
+        layout.addWidget(self.legend)
         layout.addWidget(self.plot)
 
         # Without ground truth the map as decided is drawn, solved again after each decision
@@ -140,23 +154,62 @@ class GraphView(QWidget):
                       f"<span style='color:{CURRENT_COLOR}'>◯</span> current")
         self.plot.setTitle(title, color="#444", size="9pt")
         n = self.x.size
-        if n > 1:
-            self.sequential_item.setData(_pairs(self.x, np.arange(n - 1), np.arange(1, n)),
-                                         _pairs(self.y, np.arange(n - 1), np.arange(1, n)), connect="pairs")
-        else:
-            self.sequential_item.setData([], [])
+        recording = self._recording_of_nodes(n)
+        breaks = chain_breaks(self.doc.topomap) if recording is not None else ()
+        path = path_pairs(n, breaks)
+        self.sequential_item.setData(_pairs(self.x, path[:, 0], path[:, 1]) if recording is None else [],
+                                     _pairs(self.y, path[:, 0], path[:, 1]) if recording is None else [],
+                                     connect="pairs")
+        self._draw_recordings(path, recording)
         if n <= MARKED_NODES_MAX:
-            self.nodes_item.setData(x=self.x, y=self.y, data=np.arange(n))
+            brush = (None if recording is None else
+                     [pg.mkBrush(recording_color(i)) for i in recording])
+            self.nodes_item.setData(x=self.x, y=self.y, data=np.arange(n),
+                                    brush=brush if brush is not None else pg.mkBrush(NODE_COLOR))
         else:   # markers would only overlap; the path is drawn and clicks still pick the nearest node
             self.nodes_item.setData([], [])
-        self.start_item.setData(x=self.x[:1], y=self.y[:1])
-        self.end_item.setData(x=self.x[-1:], y=self.y[-1:])
+        starts = np.concatenate([[0], np.asarray(breaks, np.int64)]).astype(np.int64) if n else np.zeros(0, np.int64)
+        ends = np.concatenate([np.asarray(breaks, np.int64) - 1, [n - 1]]).astype(np.int64) if n else starts
+        self.start_item.setData(x=self.x[starts], y=self.y[starts])   # one per recording of a site
+        self.end_item.setData(x=self.x[ends], y=self.y[ends])
         self.redraw_loops()
         self.redraw_labels()
         self.set_current_node(self.current_node)
         if n:
             self.plot.getPlotItem().enableAutoRange()
             self.plot.autoRange(padding=0.06)
+
+    def _recording_of_nodes(self, n: int) -> Optional[np.ndarray]:
+        """A site: each node's recording (index in the site), else None; the legend follows."""
+        site = self.doc.site if self.doc.has_map else None
+        sessions = self.doc.topomap.node_sessions() if site is not None else None
+        if sessions is None or len(sessions) != n:
+            self.legend.setVisible(False)
+            return None
+        index = {name: i for i, name in enumerate(site.names)}
+        recording = np.array([index.get(str(s), 0) for s in sessions], np.int64)
+        counts = np.bincount(recording, minlength=len(site.names))
+        self.legend.setText("Recordings: " + " &nbsp; ".join(
+            f"<span style='color:{recording_color(i)}; font-size:14pt'>■</span>&nbsp;<b>{name}</b>"
+            f"&nbsp;<span style='color:#666'>({counts[i]} nodes)</span>" for i, name in enumerate(site.names)))
+        self.legend.setVisible(True)
+        return recording
+
+    def _draw_recordings(self, path: np.ndarray, recording: Optional[np.ndarray]) -> None:
+        """A site: each recording's path in its colour (one item per recording)."""
+        wanted = 0 if recording is None else int(recording.max()) + 1 if recording.size else 0
+        while len(self.recording_items) < wanted:
+            item = pg.PlotDataItem(connect="pairs")
+            item.setZValue(-0.5)   # under the loops and the markers
+            self.plot.addItem(item)
+            self.recording_items.append(item)
+        while len(self.recording_items) > wanted:
+            self.plot.removeItem(self.recording_items.pop())
+        for i, item in enumerate(self.recording_items):
+            mine = path[recording[path[:, 0]] == i]
+            item.setPen(pg.mkPen(recording_color(i), width=2.5))
+            item.setData(_pairs(self.x, mine[:, 0], mine[:, 1]), _pairs(self.y, mine[:, 0], mine[:, 1]),
+                         connect="pairs")
 
     def relayout(self) -> None:
         """Solve the layout again for the decisions of now (no ground truth loaded)."""
@@ -245,7 +298,8 @@ class GraphView(QWidget):
         node = self.doc.node_id(int(data))
         d = self.doc.node_data(node)
         label = f" “{d['label']}”" if d.get("label") else ""
-        return f"{node}{label}\nframe {d['frame']}, t = {float(d['stamp']):.2f} s"
+        recording = f"\n{d['session']}" if d.get("session") else ""
+        return f"{node}{label}{recording}\nframe {d['frame']}, t = {float(d['stamp']):.2f} s"
 
     # -- clicks ----------------------------------------------------------------------
     def _scene_clicked(self, event) -> None:

@@ -5,6 +5,10 @@ this widget shows them. Rows can be multi-selected (Shift/Ctrl+click, Ctrl+A) an
 decision key applies to every selected row, as one undo step. The keys themselves
 are the window's actions (``gui.model.keys``); the table takes no letters of its own,
 and Tab leaves it (no focus trap).
+
+A site (several recordings): a third filter chooses the pair of recordings the loops join
+("All recordings", "A × A", "A × B", ... with their counts; ``ReviewQueue.pair_choices``),
+and the Query and Match cells take the colour of their node's recording.
 """
 
 from __future__ import annotations
@@ -19,8 +23,8 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QHBoxLayout, QHeade
                                QTableView, QVBoxLayout, QWidget)
 
 from .document import Document, LoopKey, LoopRow
-from .model.queue import KINDS, ReviewQueue, rank_key
-from .style import STATUS_COLORS
+from .model.queue import KINDS, ReviewQueue, in_pair, rank_key
+from .style import STATUS_COLORS, recording_color
 
 COLUMNS = ("#", "Status", "Conf.", "Query", "Match", "Score", "Inl.", "Sim.", "Yaw°")
 COLUMN_TIPS = (
@@ -138,6 +142,10 @@ class LoopTableModel(QAbstractTableModel):
             c = QColor(status_color(r.status))
             c.setAlpha(70)
             return QBrush(c)
+        if role == Qt.BackgroundRole and col in (QUERY_COLUMN, MATCH_COLUMN) and r.sessions and self.doc.site:
+            c = QColor(recording_color(self.doc.site.index(r.sessions[col == MATCH_COLUMN])))
+            c.setAlpha(90)
+            return QBrush(c)
         if role == Qt.ToolTipRole:
             return self._tooltip(r)
         return None
@@ -165,7 +173,9 @@ class LoopTableModel(QAbstractTableModel):
         label_u = self.doc.label_of_frame(r.key[0])
         label_v = self.doc.label_of_frame(r.key[1])
         names = f" ({label_u or '?'} ↔ {label_v or '?'})" if (label_u or label_v) else ""
-        parts = [f"{r.u} ↔ {r.v}{names}, frames {r.key[0]} ↔ {r.key[1]}",
+        where = (f"frames {r.key[0]} ↔ {r.key[1]}" if self.doc.site is None else
+                 f"{self.doc.place_text(r.key[0])} ↔ {self.doc.place_text(r.key[1])}")
+        parts = [f"{r.u} ↔ {r.v}{names}, {where}",
                  f"status {r.status} (found as {r.tier})", f"similarity {r.similarity:.3f}"]
         if r.score is not None:
             parts.append(f"score {r.score:.3f}")
@@ -194,30 +204,32 @@ class LoopFilterProxy(QSortFilterProxyModel):
         super().__init__()
         self.statuses: Optional[set[str]] = None
         self.kinds: Optional[set[str]] = None
+        self.pair: Optional[tuple[str, str]] = None   # a site: only loops between these recordings
 
     def sort(self, column: int, order=Qt.AscendingOrder) -> None:
         """Sort the source model (fast); this proxy keeps its order and only filters."""
         self.sourceModel().sort(column, order)
 
-    def set_filter(self, statuses: Optional[set[str]], kinds: Optional[set[str]] = None) -> None:
+    def set_filter(self, statuses: Optional[set[str]], kinds: Optional[set[str]] = None,
+                   pair: Optional[tuple[str, str]] = None) -> None:
         if hasattr(self, "beginFilterChange"):  # Qt >= 6.10; invalidateFilter is deprecated there
             self.beginFilterChange()
-            self.statuses, self.kinds = statuses, kinds
+            self.statuses, self.kinds, self.pair = statuses, kinds, pair
             self.endFilterChange()
         else:
-            self.statuses, self.kinds = statuses, kinds
+            self.statuses, self.kinds, self.pair = statuses, kinds, pair
             self.invalidateFilter()
 
     def set_statuses(self, statuses: Optional[set[str]]) -> None:
-        self.set_filter(statuses, self.kinds)
+        self.set_filter(statuses, self.kinds, self.pair)
 
     def refilter(self) -> None:
-        self.set_filter(self.statuses, self.kinds)
+        self.set_filter(self.statuses, self.kinds, self.pair)
 
     def filterAcceptsRow(self, source_row: int, source_parent: QModelIndex) -> bool:
         row = self.sourceModel().rows[source_row]
         return ((self.statuses is None or row.status in self.statuses)
-                and (self.kinds is None or row.tier in self.kinds))
+                and (self.kinds is None or row.tier in self.kinds) and in_pair(row, self.pair))
 
 
 class LoopTable(QWidget):
@@ -243,6 +255,11 @@ class LoopTable(QWidget):
         for text, _kinds in KIND_FILTERS:
             self.kind_filter.addItem(text)
         self.kind_filter.currentIndexChanged.connect(self._filter_changed)
+        self.pair_filter = QComboBox()
+        self.pair_filter.setToolTip("A site: show only the loops between these two recordings "
+                                    "(loops in all; undecided in brackets)")
+        self.pair_filter.currentIndexChanged.connect(self._filter_changed)
+        self.pair_label = QLabel("Recordings:")
         self.counts = QLabel()
         self.counts.setToolTip("Loops by status (and, below, by the kind detection found them as)")
         # May be clipped in a narrow panel rather than widen the whole window.
@@ -275,9 +292,16 @@ class LoopTable(QWidget):
         bar.addWidget(QLabel("Show:"))
         bar.addWidget(self.filter, 1)
         bar.addWidget(self.kind_filter, 1)
+        pair_bar = QHBoxLayout()   # a row of its own: one more combo would squeeze a 1280-px column
+        pair_bar.setContentsMargins(0, 0, 0, 0)
+        pair_bar.addWidget(self.pair_label)
+        pair_bar.addWidget(self.pair_filter, 1)
+        for w in (self.pair_label, self.pair_filter):
+            w.setVisible(False)
         layout = QVBoxLayout(self)
         layout.setContentsMargins(0, 0, 0, 0)
         layout.addLayout(bar)
+        layout.addLayout(pair_bar)
         layout.addWidget(self.counts)
         layout.addWidget(self.view, 1)
 
@@ -319,6 +343,8 @@ class LoopTable(QWidget):
         if not proxy_index.isValid():
             self.filter.setCurrentIndex(0)
             self.kind_filter.setCurrentIndex(0)
+            if self.pair_filter.count():
+                self.pair_filter.setCurrentIndex(0)
             proxy_index = self.proxy.mapFromSource(self.model.index(row, 0))
         self._select_proxy_row(proxy_index.row())
         return True
@@ -385,7 +411,10 @@ class LoopTable(QWidget):
         keys = self.selected_keys()
         current = self.selected_key() or self._last_key
         self.model.refresh()
-        if self.proxy.statuses is not None or self.proxy.kinds is not None:
+        pair = self.proxy.pair
+        self._update_pairs()
+        if (self.proxy.statuses is not None or self.proxy.kinds is not None or self.proxy.pair is not None
+                or pair != self.proxy.pair):
             self.proxy.refilter()  # statuses changed: rows may enter or leave the filter
         self._update_counts()
         sm = self.view.selectionModel()
@@ -404,9 +433,42 @@ class LoopTable(QWidget):
     def _filter_changed(self) -> None:
         keys = self.selected_keys()
         self.proxy.set_filter(FILTERS[max(self.filter.currentIndex(), 0)][1],
-                              KIND_FILTERS[max(self.kind_filter.currentIndex(), 0)][1])
+                              KIND_FILTERS[max(self.kind_filter.currentIndex(), 0)][1], self.pair_filter.currentData())
         if keys:
             self.select_keys(keys)  # those still shown stay selected (hidden ones are not forced back)
+
+    def set_pair(self, pair: Optional[tuple[str, str]]) -> bool:
+        """Show only the loops between the recordings of ``pair`` (None: all); False if the site has no such pair."""
+        for i in range(self.pair_filter.count()):
+            data = self.pair_filter.itemData(i)
+            if (data is None and pair is None) or (data is not None and pair is not None
+                                                    and sorted(data) == sorted(pair)):
+                self.pair_filter.setCurrentIndex(i)
+                return True
+        return False
+
+    def _update_pairs(self) -> None:
+        """The pair filter's choices and counts (a site); hidden for one recording."""
+        choices = ReviewQueue(self.doc).pair_choices()
+        for w in (self.pair_label, self.pair_filter):
+            w.setVisible(bool(choices))
+        texts = [f"{text}: {n} loops" + (f" ({u} undecided)" if u else "") for text, _p, n, u in choices]
+        pairs = [p for _t, p, _n, _u in choices]
+        self.pair_filter.blockSignals(True)
+        try:
+            if pairs == [self.pair_filter.itemData(i) for i in range(self.pair_filter.count())]:
+                for i, text in enumerate(texts):   # the same pairs: the counts only
+                    self.pair_filter.setItemText(i, text)
+            else:
+                current = self.pair_filter.currentData()
+                self.pair_filter.clear()
+                for text, pair in zip(texts, pairs):
+                    self.pair_filter.addItem(text, pair)
+                at = pairs.index(current) if current in pairs else 0
+                self.pair_filter.setCurrentIndex(at if pairs else -1)
+                self.proxy.pair = self.pair_filter.currentData()
+        finally:
+            self.pair_filter.blockSignals(False)
 
     def _update_counts(self) -> None:
         counts = ReviewQueue(self.doc).counts()

@@ -121,6 +121,9 @@ class MainWindow(QMainWindow):
                   run: bool = True) -> bool:
         return self.opening.open_path(path, topic, pose_topic, run=run)
 
+    def open_paths(self, paths: list, run: bool = True) -> bool:
+        return self.opening.open_paths(paths, run=run)
+
     def load_poses(self, path: str, topic: Optional[str] = None) -> bool:
         return self.opening.load_poses(path, topic)
 
@@ -408,7 +411,7 @@ class MainWindow(QMainWindow):
         paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
         if paths:
             event.acceptProposedAction()
-            QTimer.singleShot(0, lambda: self.opening.open_path(paths[0]))
+            QTimer.singleShot(0, lambda: self.opening.open_paths(paths))   # several: one site
 
     def closeEvent(self, event: QCloseEvent) -> None:
         if not self.sessions.maybe_save():

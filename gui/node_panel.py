@@ -86,7 +86,8 @@ class NodePanel(QWidget):
         d = self.doc.node_data(node)
         self.title.setText(f"<b>{node}</b> — node {k + 1} of {self.doc.node_count()}")
         xy = f", at ({float(d['x']):.1f}, {float(d['y']):.1f}) m" if "x" in d and self.doc.poses is not None else ""
-        self.details.setText(f"frame {d['frame']}, t = {float(d['stamp']):.2f} s, "
+        recording = f"{d['session']}, " if d.get("session") else ""
+        self.details.setText(f"{recording}frame {d['frame']}, t = {float(d['stamp']):.2f} s, "
                              f"shift {int(d.get('shift', 0))} columns{xy}")
         if not self.name.hasFocus():
             self.name.setText(str(d.get("label", "") or ""))
@@ -109,8 +110,7 @@ class NodePanel(QWidget):
     def _apply_name(self) -> None:
         if self.node_index is None or not self.doc.has_map:
             return
-        frame = int(self.doc.node_data(self.doc.node_id(self.node_index))["frame"])
-        self.labelEdited.emit(frame, self.name.text().strip())
+        self.labelEdited.emit(self.doc.node_place(self.node_index), self.name.text().strip())
 
     def _set_enabled(self, on: bool) -> None:
         for w in (self.name, self.apply_button, self.loops, self.add_button):

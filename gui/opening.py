@@ -5,6 +5,11 @@ the UI thread, bag topics asked for, the recording's saved session and (on Yes) 
 unsaved work restored through ``gui.model.recording_files``, the journal taken, the
 poses found, and the run started. What it restores and why is decided in the model;
 the questions and messages are here.
+
+A site (several recordings): a site map (``.graphml``), or several files chosen together
+in the open dialog (or dropped together). ``gui.model.site`` plans it (what to map, the site
+file the session, autosave and journal hang on) and opens each recording's frames off the
+UI thread; the rest is as for one recording, on the site file.
 """
 
 from __future__ import annotations
@@ -34,9 +39,24 @@ class Opening(QObject):
         self.w = window   # the views, the status bar and the messages it shows
 
     def open_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self.w, "Open", self.w._last_dir(), OPEN_FILTER)
-        if path:
-            self.open_path(path)
+        """One file, or several chosen together: one site of those recordings."""
+        paths, _ = QFileDialog.getOpenFileNames(self.w, "Open (several recordings: one site)", self.w._last_dir(),
+                                                OPEN_FILTER)
+        if paths:
+            self.open_paths(paths)
+
+    def open_paths(self, paths: list, run: bool = True) -> bool:
+        """Open one file as ``open_path`` does, several together as one site of those recordings."""
+        paths = [str(p) for p in paths if str(p)]
+        if len(paths) <= 1:
+            return bool(paths) and self.open_path(paths[0], run=run)
+        if not self.w.sessions.maybe_save():
+            return False
+        try:
+            return self._open_site(paths, run=run)
+        except InputError as exc:
+            self.w.error(str(exc))
+            return False
 
     def open_folder_dialog(self) -> None:
         path = QFileDialog.getExistingDirectory(self.w, "Open folder or ROS2 bag", self.w._last_dir())
@@ -48,10 +68,14 @@ class Opening(QObject):
         """Open a recording, a bag, a folder, a session or a descriptors .npz (and run)."""
         if not self.w.sessions.maybe_save():
             return False
+        from engine.site import is_site_map
+
         p = Path(path).expanduser()
         try:
             if p.is_file() and is_session_file(p):
                 ok = self._open_session(p, run=run)
+            elif is_site_map(p):
+                ok = self._open_site([str(p)], run=run)
             else:
                 ok = self._open_input(p, topic, pose_topic, run=run)
         except InputError as exc:
@@ -93,6 +117,42 @@ class Opening(QObject):
                                             shift=params.uses_shift,
                                             options=self.w.runs._panel_options(self.w.describe_options, descriptor))
 
+        return self._start_document(p, source, settings, session, session_file, pose_topic, run)
+
+    def _open_site(self, paths: list, run: bool, session: Optional[Session] = None,
+                   session_file: Optional[Path] = None) -> bool:
+        """Several recordings, or a site map, as one document on the site file (module notes)."""
+        from engine.sources import open_recording
+
+        from .background import call_in_background
+        from .model.site import open_site, plan_site
+
+        plan = plan_site(paths)   # a recording or descriptors file gone: one line, nothing touched
+        site, frames, missing = call_in_background(
+            self.w, f"Reading {len(plan.sessions)} recordings…", lambda: open_site(plan, lambda q: open_recording(Path(q))))
+        if session is not None and session.describe:
+            settings = _describe_settings(session.describe, self.w.describe_options)
+        else:
+            from engine.pipeline import DescribeSettings
+
+            params = session.map_params() if session else self.w.params_panel.params()
+            descriptor = self.w.params_panel.descriptor_name()
+            settings = DescribeSettings(descriptor=descriptor, interval=self.w.params_panel.interval_value(),
+                                        shift=params.uses_shift,
+                                        options=self.w.runs._panel_options(self.w.describe_options, descriptor))
+        if not self._start_document(site.anchor, frames, settings, session, session_file, None, run, site=site):
+            frames.close()
+            return False
+        if missing:
+            self.w.warn(missing)
+        if not site.new:
+            self.w._add_recent(str(site.anchor))
+        return True
+
+    def _start_document(self, p: Path, source, settings, session: Optional[Session], session_file: Optional[Path],
+                        pose_topic: Optional[str], run: bool, site=None) -> bool:
+        """A new document of ``p`` (a recording, or a site's file) shown from ``source``: the
+        journal taken, nothing of the previous document kept, saved work restored, the run started."""
         try:
             self.w.files.attach(p)
         except JournalLocked as exc:
@@ -116,11 +176,13 @@ class Opening(QObject):
         self.w.doc.params = session.map_params() if session else self.w.runs._start_params
         self.w._pending_decisions = None
         self.w.sessions._pending_view = {}
+        self.w.doc.site = site
         self.w.doc.set_source(p, source)
         self.w.doc.mapReplaced.emit()  # views clear
         self.w.curation.select_pair_key(None)   # nothing of the previous recording stays selected (defect 5)
         self.w.params_panel.set_describe(settings.descriptor, settings.interval)
-        self._load_initial_poses(p, session, pose_topic)
+        if site is None:   # a site's ground truth is one file per recording: ``panotopo eval``
+            self._load_initial_poses(p, session, pose_topic)
         self._restore_saved_work(p, session, session_file)
         self.w.params_panel.set_params(self.w.doc.params, {})   # unset thresholds: "auto" until the map is built
         self._show_journal_state()
@@ -182,9 +244,14 @@ class Opening(QObject):
         self._show_journal_state()
 
     def _open_session(self, path: Path, run: bool = True) -> bool:
+        from engine.site import is_site_map
+
         session = Session.load(path)
-        ok = self._open_input(Path(session.input_path), session.describe.get("topic"), None, run=run,
-                              session=session, session_file=path)
+        if is_site_map(session.input_path):
+            ok = self._open_site([session.input_path], run=run, session=session, session_file=path)
+        else:
+            ok = self._open_input(Path(session.input_path), session.describe.get("topic"), None, run=run,
+                                  session=session, session_file=path)
         if ok:
             self.w.doc.session_path = path
             self.w._update_title()
@@ -268,6 +335,10 @@ class Opening(QObject):
         from engine.sources import list_pose_topics, read_poses
 
         p = Path(path)
+        if self.w.doc.site is not None:
+            self.w.error("A site's ground truth is one file per recording: evaluate it with "
+                         "panotopo eval SITE.graphml --poses A_poses.csv --poses B_poses.csv")
+            return False
         try:
             if topic is None and (self._is_bag(p)):
                 topics = [t for t, _m, _c in list_pose_topics(p)]

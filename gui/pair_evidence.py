@@ -211,9 +211,13 @@ class MatchCache:
         descs = self.doc.descs
         table = getattr(descs, "features", None) if descs is not None else None
         if table is not None:
-            rows = np.flatnonzero(np.asarray(descs.frames) == frame)
-            if rows.size and int(rows[0]) < len(table):
-                return table.of(int(rows[0])), int(descs.shifts[rows[0]]), width
+            row = self.doc.descriptor_row(frame)   # a site: the row of that recording's frame
+            if row is not None and row < len(table):
+                shift = int(descs.shifts[row])
+                counted = int(descs.meta.get("frame_width", 0) or 0) if self.doc.site is not None else 0
+                if counted and counted != width:   # a site's shifts count in its first recording's width
+                    shift = int(round(shift * width / counted)) % width
+                return table.of(row), shift, width
         from engine.features import extract
         from engine.shift import apply_shift
 

@@ -163,7 +163,8 @@ class PairView(QWidget):
         u, v = self.doc.nodes_of(key)
         du, dv = self.doc.node_data(u), self.doc.node_data(v)
         attrs = self.doc.loop_attrs(key)
-        a, b = self.cache.get(key[0]), self.cache.get(key[1])
+        a, b = self.cache.get(key[0]), self.cache.get(key[1])   # a site: each from its own recording
+        b = _same_size(b, a)
         self.matches, waiting = self._matches_of(key)
         self.yaw, self.yaw_score = None, None
         yaw_source = ""
@@ -185,8 +186,8 @@ class PairView(QWidget):
         state = (f"<span style='color:{STATUS_COLORS.get(status, '#000')}'><b>{status}</b></span>"
                  if status else "<i>not a loop</i>")
         yaw_text = f"yaw {self.yaw:+.1f}° ({yaw_source})" if self.yaw is not None else "yaw unknown"
-        self.title.setText(f"<b>{u}</b> (frame {key[0]}) ↔ <b>{v}</b> (frame {key[1]}) &nbsp;·&nbsp; "
-                           f"{state} &nbsp;·&nbsp; {yaw_text}")
+        self.title.setText(f"<b>{u}</b> ({self.doc.place_text(key[0])}) ↔ <b>{v}</b> ({self.doc.place_text(key[1])})"
+                           f" &nbsp;·&nbsp; {state} &nbsp;·&nbsp; {yaw_text}")
         lines = evidence_lines(attrs, self.matches, sim)
         if self.matches is None and shown:
             failed = self.match_cache.errors.get(key)
@@ -331,4 +332,18 @@ class PairView(QWidget):
 
 def _caption(role: str, node: str, data: dict) -> str:
     label = f" “{data['label']}”" if data.get("label") else ""
-    return f"{role}: {node}{label}, frame {data['frame']}, t = {float(data['stamp']):.1f} s"
+    recording = f" of {data['session']}" if data.get("session") else ""
+    return f"{role}: {node}{label}{recording}, frame {data['frame']}, t = {float(data['stamp']):.1f} s"
+
+
+def _same_size(b, a):
+    """Frame ``b`` at ``a``'s size (two recordings of a site may differ), its shift scaled along."""
+    if a is None or b is None or a.rgb.shape == b.rgb.shape:
+        return b
+    from dataclasses import replace
+
+    h, w = a.rgb.shape[:2]
+    hb, wb = b.rgb.shape[:2]
+    rows = (np.arange(h) * hb // h).clip(0, hb - 1)
+    cols = (np.arange(w) * wb // w).clip(0, wb - 1)
+    return replace(b, rgb=np.ascontiguousarray(b.rgb[rows][:, cols]), shift=int(round(b.shift * w / wb)) % w)

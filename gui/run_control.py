@@ -6,6 +6,11 @@ a parameter change (``gui.background.Worker``, newest request wins; the job gets
 copy of the decisions, ``MapDocument.remap_job``). Whether a change needs a new
 describe or only a re-map, and which thresholds are known, is decided in
 ``gui.model.run_plan`` and ``engine.pipeline.descriptors_fit``.
+
+A site (several recordings) runs ``engine.site.map_site`` (the CLI's orchestrator) and
+re-maps its concatenated descriptors per recording (``gui.model.site.site_remap``); a
+site opened from recordings chosen together gets its site file written once its first
+map is there (``gui.model.site``), so that it can be reopened with its work.
 """
 
 from __future__ import annotations
@@ -64,7 +69,7 @@ class RunControl(QObject):
         old = self.w.doc.describe_settings or DescribeSettings()
         descriptor = self.w.params_panel.descriptor_name()
         interval = self.w.params_panel.interval_value()
-        if self.w.doc.descs is not None and str(self.w.doc.input_path).endswith(".npz"):
+        if self.w.doc.descs is not None and self.w.doc.descriptors_only():
             descriptor, interval = old.descriptor, old.interval  # a descriptors file is what it is
         options = self._panel_options(old.options if descriptor == old.descriptor else self.w.describe_options,
                                       descriptor)
@@ -93,7 +98,9 @@ class RunControl(QObject):
         self.w.progress_bar.setRange(0, 0)
         self.w.progress_bar.setFormat("starting…")
         self.w.eta_label.setText("")
-        job = RunJob(Path(self.w.doc.input_path), settings, self.w.doc.params, DescriptorCache(self.w.cache_root))
+        site = self.w.doc.site
+        job = RunJob(list(site.inputs) if site is not None else Path(self.w.doc.input_path), settings,
+                     self.w.doc.params, DescriptorCache(self.w.cache_root))
         self.w.statusBar().showMessage("Running the engine…")
         self.w.runner.start(job)
         self.w._update_actions()
@@ -145,10 +152,16 @@ class RunControl(QObject):
             return
         self._preparing_run = None
         self._show_progress(False)
+        site = self.w.doc.site
+        if site is not None:
+            if result.sessions != site.names:   # the site file changed under the open site
+                self._on_run_failed(f"the recordings of {site.anchor.name} changed while it was open: open it again")
+                return
+            site.row_starts = list(result.row_starts)
         self.w.doc.describe_settings = result.job.settings
         self._defaults = descriptor_defaults(result.descs)
-        self._set_known_shifts(result.descs)
         self.w.doc.install(prepared, result.descs)
+        self._set_known_shifts(result.descs)
         if needs_remap(result.job.params, self.w.doc.params):
             # The user changed a map parameter while the run was going: honour it (off the UI thread).
             self._remap(self.w.doc.params)
@@ -161,7 +174,9 @@ class RunControl(QObject):
         self.w.sessions._restore_view()
         self.w.statusBar().showMessage(
             f"Map built in {result.seconds:.1f} s: {self.w.doc.node_count()} nodes, "
-            f"{len(self.w.doc.loop_rows())} loop candidates", 10000)
+            f"{len(self.w.doc.loop_rows())} loop candidates" + "".join(f" · {n}" for n in result.notes), 10000)
+        if site is not None and site.new:
+            self._write_site_file()
         self.w._update_actions()
         if self.w.sessions.is_modified():
             self.w.sessions.autosave()
@@ -196,8 +211,22 @@ class RunControl(QObject):
         return known_thresholds(self.w.doc.params, meta, self._defaults)
 
     def _set_known_shifts(self, descs) -> None:
-        self.w.frames.known_shifts = ({int(f): int(s) for f, s in zip(descs.frames, descs.shifts)}
-                                    if descs.meta.get("shift", True) else {})
+        self.w.frames.known_shifts = ({int(f): int(s) for f, s in zip(self.w.doc.descriptor_places(), descs.shifts)}
+                                      if descs.meta.get("shift", True) else {})
+        # A site's shifts are counted in its first recording's frame width (engine.site.combine).
+        self.w.frames.known_width = int(descs.meta.get("frame_width", 0) or 0) if self.w.doc.site is not None else 0
+
+    def _write_site_file(self) -> None:
+        """The site file of recordings opened together, written once (their work hangs on it)."""
+        site = self.w.doc.site
+        try:
+            self.w.doc.topomap.write_graphml(site.anchor, keep_rejected=True, keep_candidates=True)
+        except (InputError, OSError) as exc:
+            self.w.warn(f"The site file {site.anchor} could not be written ({getattr(exc, 'strerror', None) or exc}): "
+                        "decisions are journaled, but reopening needs the recordings chosen together again")
+            return
+        site.new = False
+        self.w._add_recent(str(site.anchor))
 
     def _params_edited(self, field: str, new: MapParams) -> None:
         old = self.w.doc.params
@@ -225,7 +254,7 @@ class RunControl(QObject):
             self._start_params = new
         self.w.params_panel.set_params(new, self._used_defaults(built=False))
         plan = run_plan.plan_change(new, self.w.doc.descs, self.w.doc.describe_settings,
-                                    str(self.w.doc.input_path).endswith(".npz"), self._preparing_run is not None)
+                                    self.w.doc.descriptors_only(), self._preparing_run is not None)
         if plan.action == run_plan.DESCRIBE:
             self.start_run()
         elif plan.action == run_plan.REFUSE:
@@ -237,9 +266,16 @@ class RunControl(QObject):
         """Build and prepare the map with ``params`` off the UI thread; the newest request wins."""
         from engine.pipeline import build_map
 
-        descs, source = self.w.doc.descs, str(self.w.doc.input_path)
+        descs, source, site = self.w.doc.descs, str(self.w.doc.input_path), self.w.doc.site
         self.w.statusBar().showMessage("Rebuilding the map…")
-        job = self.w.doc.remap_job(lambda: build_map(descs, params, source=source))
+        if site is not None:   # each recording its own nodes and chain, as engine.site maps them
+            from .model.site import site_remap
+
+            records, named = (self.w.doc.topomap.graph.graph.get("sessions", ""),
+                              str(self.w.doc.topomap.meta.get("source", "")))
+            job = self.w.doc.remap_job(lambda: site_remap(descs, params, site, records, named))
+        else:
+            job = self.w.doc.remap_job(lambda: build_map(descs, params, source=source))
         self.w.remapper.submit(job, lambda prepared: self._remapped(descs, params, prepared),
                              lambda exc: self._remap_failed(descs, params, exc))
 

@@ -4,6 +4,9 @@
 ``gui.model.recording_files`` (regular files of ours only), asks before unsaved work
 is dropped, restores the view a session kept, and exports the corrected graph, a
 picture of it and the evaluation plot.
+
+A site's session is the session of its site file; its view names frames as each
+recording's own (``selected_sessions``, ``frame_session``) and keeps the pair filter.
 """
 
 from __future__ import annotations
@@ -38,6 +41,14 @@ class SessionControl(QObject):
         view = {"frame": frame if frame >= 0 else None, "tab": self.w.tabs.currentIndex(),  # -1: no frames shown
                 "filter": self.w.loop_table.filter.currentIndex(),
                 "selected": list(key) if key is not None else None}
+        site = self.w.doc.site
+        if site is not None:   # frames as each recording's own (a site frame is no name on disk)
+            if key is not None:
+                view["selected"], view["selected_sessions"] = self.w.doc.address(key)
+            if frame >= 0:
+                view["frame_session"], view["frame"] = site.local(frame)
+            pair = self.w.loop_table.pair_filter.currentData()
+            view["pair"] = list(pair) if pair else None
         return Session(input_path=str(self.w.doc.input_path), describe=settings.as_dict() if settings else {},
                        params=self.w.doc.params.as_dict(), decisions=decisions, poses_path=self.w.doc.poses_path,
                        poses_topic=self.w.doc.poses_topic, view=view)
@@ -83,10 +94,21 @@ class SessionControl(QObject):
             self.w.tabs.setCurrentIndex(view["tab"])
         if isinstance(view.get("filter"), int):
             self.w.loop_table.filter.setCurrentIndex(view["filter"])
-        if isinstance(view.get("selected"), list) and len(view["selected"]) == 2:
-            self.w.curation.select_loop(tuple(int(f) for f in view["selected"]))
-        if isinstance(view.get("frame"), int) and view["frame"] >= 0:  # after the selection, which moves it
-            self.w.frame_viewer.show_frame(view["frame"])
+        site = self.w.doc.site
+        if site is not None and isinstance(view.get("pair"), list) and len(view["pair"]) == 2:
+            self.w.loop_table.set_pair(tuple(str(n) for n in view["pair"]))
+        try:
+            if isinstance(view.get("selected"), list) and len(view["selected"]) == 2:
+                sessions = view.get("selected_sessions") if site is not None else None
+                names = sessions if isinstance(sessions, list) and len(sessions) == 2 else None
+                self.w.curation.select_loop(self.w.doc.key_of_address([int(f) for f in view["selected"]], names))
+            if isinstance(view.get("frame"), int) and view["frame"] >= 0:  # after the selection, which moves it
+                frame = view["frame"]
+                if site is not None:
+                    frame = site.place(str(view.get("frame_session") or site.names[0]), frame)
+                self.w.frame_viewer.show_frame(frame)
+        except InputError:   # a recording the site no longer has: the view is only a convenience
+            pass
 
     def maybe_save(self) -> bool:
         """Ask before unsaved work is dropped; False means stay."""
@@ -121,6 +143,8 @@ class SessionControl(QObject):
         if not self.w.doc.has_map:
             return
         start = str(Path(self.w.doc.input_path).with_suffix(".graphml"))
+        if self.w.doc.site is not None:   # never over the site file itself
+            start = str(Path(self.w.doc.input_path).with_suffix(".corrected.graphml"))
         path, _ = QFileDialog.getSaveFileName(self.w, "Export corrected graph", start, "GraphML (*.graphml)")
         if path:
             self.export_graphml(path)

@@ -26,6 +26,14 @@ STATUS_LABELS = {
 # The order in which the views list the statuses (toggles, legends).
 STATUS_ORDER = ("candidate", "auto", "confirmed", "manual", "rejected")
 SEQUENTIAL_COLOR = "#7f8c8d"
+# One colour per recording of a site (path, nodes, the table's node cells, the legend): dark and
+# unlike the loop statuses' colours, so that a path is never read as a loop.
+RECORDING_COLORS = ("#00838f", "#6d4c41", "#5e35b1", "#7cb342", "#546e7a", "#d81b60", "#1565c0", "#9e7c00")
+
+
+def recording_color(i: int) -> str:
+    """The colour of a site's ``i``-th recording (the palette repeats past eight)."""
+    return RECORDING_COLORS[int(i) % len(RECORDING_COLORS)]
 NODE_COLOR = "#34495e"
 CURRENT_COLOR = "#e84393"
 SELECTED_COLOR = "#8e44ad"

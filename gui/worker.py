@@ -6,9 +6,9 @@ from __future__ import annotations
 import sys
 import time
 import traceback
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Optional
+from typing import Optional, Union
 
 from PySide6.QtCore import QObject, Signal
 
@@ -20,7 +20,7 @@ from .background import Job, Worker
 
 @dataclass
 class RunJob:
-    path: Path
+    path: Union[Path, list]       # a recording, or a site's inputs (``engine.site.map_site``)
     settings: object              # engine.pipeline.DescribeSettings
     params: MapParams
     cache: object = None          # engine.descriptors.cache.DescriptorCache
@@ -34,6 +34,9 @@ class FinishedRun:
     descs: object                 # Descriptors
     topomap: object               # TopoMap
     seconds: float
+    row_starts: list = field(default_factory=list)   # a site: first descriptor row of each recording
+    sessions: list = field(default_factory=list)     # a site: the recordings' names, in map order
+    notes: list = field(default_factory=list)        # a site: one line each for the user
 
 
 def run_job(job: RunJob, work: Job) -> FinishedRun:
@@ -42,6 +45,14 @@ def run_job(job: RunJob, work: Job) -> FinishedRun:
     from engine.run import run
 
     t0 = time.monotonic()
+    if isinstance(job.path, list):   # a site: the CLI's orchestrator of several recordings
+        from engine.site import components_line, map_site
+
+        site = map_site([str(p) for p in job.path], job.params, job.settings, cache=job.cache,
+                        progress=work.progress, cancel=work.cancel)
+        notes = list(site.notes) + [line for line in [components_line(site.components)] if line]
+        return FinishedRun(job, site.descs, site.topomap, time.monotonic() - t0, list(site.row_starts),
+                           [s.name for s in site.sessions], notes)
     out = run(job.path, job.params, settings=job.settings, progress=work.progress, cancel=work.cancel,
               cache=job.cache)
     return FinishedRun(job, out.descs, out.topomap, time.monotonic() - t0)

@@ -13,6 +13,10 @@ turns the same names into Qt signals. Events: ``mapReplaced``, ``loopsChanged``,
 Every decision (a status, a manual loop added or removed, a place name) passes
 through ``record_decision`` as one plain record (see ``gui.model.journal``), the
 single point where a write-through journal hooks in.
+
+A site (several recordings, ``gui.model.site``): ``site`` is set, and every frame the
+document speaks of (keys, ``node_frames``, labels) is a *site frame*; what it writes for
+the engine or the journal names each recording and its own frame (``address``).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from engine.params import MapParams
 from . import journal as journal_records
 from . import similarity
 from .history import Command, History
-from .loop_key import LoopKey, frames_key  # noqa: F401  (re-exported)
+from .loop_key import LoopKey, address_item, address_key, frames_key  # noqa: F401  (re-exported)
 from .similarity import Similarity
 
 # Loop tiers and decisions. "candidate": found but not accepted, waiting for a person;
@@ -54,6 +58,7 @@ class LoopRow:
     yaw: Optional[float]
     status: str
     tier: str = "auto"                     # what detection made of it: "candidate", "auto" or "manual"
+    sessions: Optional[tuple[str, str]] = None   # a site: the recordings of u and v (site order)
     # The evidence behind a detected loop, where the engine gives it (engine.graph.EVIDENCE_KEYS).
     score: Optional[float] = None          # calibrated descriptor score (sigmas above the background)
     inliers: Optional[int] = None          # local features consistent with one two-view model
@@ -96,17 +101,20 @@ class PreparedMap:
 
 
 def prepare_map(topomap, decisions: Optional[dict] = None, poses=None,
-                preparers: Optional[dict[str, Callable]] = None) -> PreparedMap:
+                preparers: Optional[dict[str, Callable]] = None, site=None) -> PreparedMap:
     """Index ``topomap``, note each loop's tier, apply ``decisions`` and ``poses``, make its rows,
-    and run each of ``preparers`` (name -> fn(topomap)) into ``extras``.
+    and run each of ``preparers`` (name -> fn(topomap)) into ``extras``. ``site``: the
+    ``gui.model.site.Site`` the map is of (its nodes are then addressed by site frames).
 
     Touches only ``topomap`` (safe in a worker thread while the UI shows another map).
     """
     g = topomap.graph
-    node_of_frame = {int(d["frame"]): n for n, d in g.nodes(data=True)}
-    frames = np.asarray(topomap.frames(), np.int64)
+    places = _places(topomap, site)
+    node_of_frame = {int(places[int(d["index"])]): n for n, d in g.nodes(data=True)}
+    frames = places
     # Before the decisions overwrite the statuses; engine maps since the tiers also carry "tier".
-    tiers = {_key(g, u, v): str(attrs.get("tier", attrs.get("status", "auto"))) for u, v, attrs in topomap.loops()}
+    tiers = {_key(g, u, v, site): str(attrs.get("tier", attrs.get("status", "auto")))
+             for u, v, attrs in topomap.loops()}
     if decisions and any(decisions.get(k) for k in ("loops", "manual")):
         topomap.apply_decisions(decisions)
         if topomap.graph.graph.get("positions") == "estimated":
@@ -117,11 +125,18 @@ def prepare_map(topomap, decisions: Optional[dict] = None, poses=None,
         x, y = poses.at(np.asarray(topomap.stamps(), np.float64))
         topomap.set_positions(x, y)
     extras = {name: fn(topomap) for name, fn in (preparers or {}).items()}
-    return PreparedMap(topomap, node_of_frame, frames, tiers, make_loop_rows(topomap, tiers), poses,
+    return PreparedMap(topomap, node_of_frame, frames, tiers, make_loop_rows(topomap, tiers, site), poses,
                        extras=extras)
 
 
-def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
+def _places(topomap, site) -> np.ndarray:
+    """Each node's source frame (a site: its site frame), in node order."""
+    if site is not None and topomap.node_sessions() is not None:
+        return site.node_places(topomap)
+    return np.asarray(topomap.frames(), np.int64)
+
+
+def make_loop_rows(topomap, tiers: dict[LoopKey, str], site=None) -> list[LoopRow]:
     """The loop arcs of ``topomap`` as rows, in node order."""
     g = topomap.graph
     rows = []
@@ -129,7 +144,10 @@ def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
         iu, iv = int(g.nodes[u]["index"]), int(g.nodes[v]["index"])
         if iu > iv:
             u, v, iu, iv = v, u, iv, iu
-        key = _key(g, u, v)
+        key = _key(g, u, v, site)
+        sessions = None
+        if site is not None and "session" in g.nodes[u]:
+            sessions = site.pair(str(g.nodes[u]["session"]), str(g.nodes[v]["session"]))
         status = str(attrs.get("status", "auto"))
         inliers, matches, direction = (_number(attrs.get(k)) for k in ("inliers", "matches", "direction"))
         rows.append(LoopRow(
@@ -146,13 +164,17 @@ def make_loop_rows(topomap, tiers: dict[LoopKey, str]) -> list[LoopRow]:
             matches=None if matches is None else int(matches),
             direction=None if direction is None else int(direction),
             confidence=_number(attrs.get("confidence")),
+            sessions=sessions,
         ))
     rows.sort(key=lambda r: (r.index_u, r.index_v))
     return rows
 
 
-def _key(g, u: str, v: str) -> LoopKey:
-    return frames_key((g.nodes[u]["frame"], g.nodes[v]["frame"]))
+def _key(g, u: str, v: str, site=None) -> LoopKey:
+    du, dv = g.nodes[u], g.nodes[v]
+    if site is not None and "session" in du:
+        return frames_key((site.place(du["session"], du["frame"]), site.place(dv["session"], dv["frame"])))
+    return frames_key((du["frame"], dv["frame"]))
 
 
 class MapDocument:
@@ -160,6 +182,7 @@ class MapDocument:
 
     def __init__(self) -> None:
         self.input_path: Optional[Path] = None
+        self.site = None                        # gui.model.site.Site when several recordings are open
         self.source = None                      # engine.frames.FrameSource for the viewer
         # engine.pipeline.DescribeSettings as the user chose them: the run adds the method's
         # describe options (engine.pipeline.method_settings), so another method gets its own.
@@ -182,6 +205,7 @@ class MapDocument:
         self._listeners: dict[str, list[Callable]] = {}
         self._node_of_frame: dict[int, str] = {}
         self._frames = np.zeros(0, np.int64)
+        self._row_places: Optional[np.ndarray] = None   # descriptor rows' site frames (a site)
         self.decision_version = 0               # +1 on every decision: a map prepared meanwhile is stale
         self._similarity: Optional[Similarity] = None
         self._rows: Optional[list[LoopRow]] = None
@@ -213,7 +237,7 @@ class MapDocument:
 
     def replace_map(self, topomap, descs=None, decisions: Optional[dict] = None) -> None:
         """Show a new map; ``decisions`` (from the old map, a session or a journal) are re-applied."""
-        self.install(prepare_map(topomap, decisions, self.poses), descs)  # small maps, tests: here
+        self.install(prepare_map(topomap, decisions, self.poses, site=self.site), descs)  # small maps, tests: here
 
     def remap_job(self, build: Callable[[], object], decisions: Optional[dict] = None) -> Callable[[], PreparedMap]:
         """A function for a worker thread: ``build()`` a map and prepare it with today's decisions
@@ -225,12 +249,12 @@ class MapDocument:
         and ``is_current`` then refuses the result (the caller asks again), so no decision
         is ever lost to a re-map.
         """
-        old, poses, version = self.topomap, self.poses, self.decision_version
+        old, poses, version, site = self.topomap, self.poses, self.decision_version, self.site
         preparers = dict(self.preparers)
         carried = copy.deepcopy(decisions if decisions is not None else (old.decisions() if old is not None else {}))
 
         def job() -> PreparedMap:
-            prepared = prepare_map(build(), carried, poses, preparers)
+            prepared = prepare_map(build(), carried, poses, preparers, site=site)
             prepared.decision_version = version
             return prepared
 
@@ -247,6 +271,7 @@ class MapDocument:
         self.topomap = prepared.topomap
         self._node_of_frame = prepared.node_of_frame
         self._frames = prepared.frames
+        self._row_places = None
         self._tiers = prepared.tiers
         self._rows = prepared.rows
         self._extras = prepared.extras
@@ -266,6 +291,7 @@ class MapDocument:
         self._tiers = {}
         self._node_of_frame = {}
         self._frames = np.zeros(0, np.int64)
+        self._row_places = None
 
     def set_poses(self, poses, path: Optional[str], topic: Optional[str] = None) -> None:
         self.poses, self.poses_path, self.poses_topic = poses, path, topic
@@ -305,11 +331,60 @@ class MapDocument:
         frames = self.node_frames()
         if frames.size == 0:
             return None
-        k = int(np.searchsorted(frames, frame, side="right")) - 1
-        return max(k, 0)
+        k = max(int(np.searchsorted(frames, frame, side="right")) - 1, 0)
+        if self.site is not None:   # a site: a node of the frame's own recording (its first one)
+            lo, hi = self.site.span_of(self.site.local(frame)[0])
+            if frames[k] < lo:
+                first = int(np.searchsorted(frames, lo, side="left"))
+                if first < frames.size and frames[first] < hi:
+                    k = first
+        return k
 
     def key_of(self, u: str, v: str) -> LoopKey:
-        return _key(self.topomap.graph, u, v)
+        return _key(self.topomap.graph, u, v, self.site)
+
+    # -- where things are: one recording, or a site's recordings -----------------------
+    def address(self, key: LoopKey) -> tuple[list[int], Optional[list[str]]]:
+        """(frames, recordings) of ``key`` as the engine and the journal name it: the
+        frames themselves for one recording; each recording's own frame in a site."""
+        if self.site is None:
+            return [int(key[0]), int(key[1])], None
+        return self.site.address(key)
+
+    def key_of_address(self, frames, sessions=None) -> LoopKey:
+        """The key of an address on disk (the inverse of ``address``)."""
+        if self.site is None:
+            return frames_key(frames)
+        return self.site.key_of(frames, sessions)
+
+    def place_text(self, frame: int) -> str:
+        """How a frame is named to the user: "frame 12" (a site: "A.mp4 frame 12")."""
+        return f"frame {int(frame)}" if self.site is None else self.site.place_text(frame)
+
+    def node_place(self, k: int) -> int:
+        """The frame (a site: the site frame) of node index ``k``."""
+        return int(self.node_frames()[int(k)])
+
+    def descriptors_only(self) -> bool:
+        """The map is made from descriptors files only (nothing can be described again)."""
+        if self.site is not None:
+            return self.site.descriptors_only
+        return str(self.input_path).endswith(".npz")
+
+    def descriptor_places(self) -> np.ndarray:
+        """The frame (a site: the site frame) of each descriptor row."""
+        if self.descs is None:
+            return np.zeros(0, np.int64)
+        if self.site is None:
+            return np.asarray(self.descs.frames, np.int64)
+        if getattr(self, "_row_places", None) is None or len(self._row_places) != len(self.descs):
+            self._row_places = self.site.row_places(self.descs)
+        return self._row_places
+
+    def descriptor_row(self, frame: int) -> Optional[int]:
+        """The descriptor row of ``frame`` (a site: site frame), or None."""
+        rows = np.flatnonzero(self.descriptor_places() == int(frame))
+        return int(rows[0]) if rows.size else None
 
     def key_of_nodes(self, a: int, b: int) -> LoopKey:
         """The key of the pair of node indices ``a``, ``b``."""
@@ -438,16 +513,19 @@ class MapDocument:
                 self._carry(key, status)  # an undo after a re-map dropped the loop
             else:
                 self._set_status(key, status)
-            self.record_decision(journal_records.status(key, status))
+            frames, sessions = self.address(key)
+            self.record_decision(journal_records.status(frames, status, sessions))
         self._after_loop_edit()
 
     def _carry(self, key: LoopKey, status: str) -> None:
         """A decision on a loop this map does not have: kept with the map's unapplied ones, so
         it comes back when a later map has the loop again (``TopoMap.apply_decisions``)."""
+        frames, sessions = self.address(key)
+        here = address_key(frames, sessions)
         unapplied = self.topomap.unapplied["loops"]
-        unapplied[:] = [d for d in unapplied if frames_key(d["frames"]) != tuple(key)]
+        unapplied[:] = [d for d in unapplied if address_key(d["frames"], d.get("sessions")) != here]
         if status not in UNDECIDED:
-            unapplied.append({"frames": [int(key[0]), int(key[1])], "status": status})
+            unapplied.append({**address_item(frames, sessions), "status": status})
 
     def set_loop_status(self, key: LoopKey, status: str) -> None:
         self.set_loop_statuses({tuple(key): status})
@@ -462,20 +540,23 @@ class MapDocument:
         key = self.key_of(u, v)
         if status != "manual":
             self._set_status(key, status)
-        self.record_decision(journal_records.manual(key, yaw, status))
+        frames, sessions = self.address(key)
+        self.record_decision(journal_records.manual(frames, yaw, status, sessions))
         self._after_loop_edit()
 
     def remove_loop(self, key: LoopKey) -> None:
         self.topomap.remove_loop(*self._nodes_near(key))
-        self.record_decision(journal_records.removed(key))
+        frames, sessions = self.address(key)
+        self.record_decision(journal_records.removed(frames, sessions))
         self._after_loop_edit()
 
     def set_label(self, frame: int, label: str) -> None:
         node = self.node_of_frame(frame)
         if node is None:  # an undo after a re-map moved the nodes: the nearest, as apply_decisions does
-            node = self.node_id(int(np.argmin(np.abs(self.node_frames() - int(frame)))))
+            node = self.node_id(self._nearest_node(int(frame)))
         self.topomap.set_label(node, label)
-        self.record_decision(journal_records.label(frame, label))
+        frames, sessions = self.address((frame, frame))
+        self.record_decision(journal_records.label(frames[0], label, sessions[0] if sessions else None))
         self._rows = None
         self._notify("labelsChanged")
 
@@ -485,11 +566,22 @@ class MapDocument:
         nodes = self.nodes_of(key) if self.topomap is not None else None
         if nodes is not None:
             return nodes
-        frames = self.node_frames()
-        if frames.size == 0:
+        if self.node_frames().size == 0:
             raise KeyError(f"no nodes at frames {key}")
-        a, b = (int(np.argmin(np.abs(frames - int(f)))) for f in key)
+        a, b = (self._nearest_node(int(f)) for f in key)
         return self.node_id(a), self.node_id(b)
+
+    def _nearest_node(self, frame: int) -> int:
+        """The node nearest in frame to ``frame`` (a site: among its own recording's nodes)."""
+        frames = self.node_frames()
+        candidates = np.arange(frames.size)
+        if self.site is not None:
+            lo, hi = self.site.span_of(self.site.local(frame)[0])
+            mine = candidates[(frames >= lo) & (frames < hi)]
+            if mine.size == 0:
+                raise KeyError(f"no nodes of {self.site.local(frame)[0]} in this map")
+            candidates = mine
+        return int(candidates[int(np.argmin(np.abs(frames[candidates] - int(frame))))])
 
     def _require(self, key: LoopKey) -> tuple[str, str]:
         nodes = self.nodes_of(key) if self.topomap is not None else None

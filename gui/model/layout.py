@@ -16,6 +16,11 @@ on a spiral drew a straight walk as a self-crossing spiral); a loop pulls the tw
 visits of a place together, so a loop-shaped route looks like a loop. Maps over
 ``EMBED_MAX_NODES`` are laid out as a serpentine (rows walked left, right, left…),
 which does not cross itself either; their loops are curves across it.
+
+A site (several recordings, ``engine.site``) has one path per recording: no path arc
+joins the last node of one recording to the first of the next (``DecidedGraph.breaks``),
+so recordings are placed by the loops that join them; recordings no loop joins are
+drawn one below the other.
 """
 
 from __future__ import annotations
@@ -53,6 +58,22 @@ class DecidedGraph:
     n: int
     loops: np.ndarray                        # (k, 2) node indices of the kept loops
     estimated: Optional[np.ndarray] = None   # (n, 2) the pose graph's positions, still valid
+    breaks: tuple = ()                       # a site: node indices where another recording starts
+
+
+def chain_breaks(topomap) -> tuple:
+    """Node indices where a site's next recording starts (() for one recording)."""
+    sessions = topomap.node_sessions()
+    if sessions is None or len(sessions) < 2:
+        return ()
+    return tuple(int(k) for k in np.flatnonzero(sessions[1:] != sessions[:-1]) + 1)
+
+
+def path_pairs(n: int, breaks: tuple = ()) -> np.ndarray:
+    """(m, 2) node indices of the path arcs: consecutive nodes of one recording."""
+    starts = np.arange(n - 1)
+    keep = ~np.isin(starts + 1, np.asarray(breaks, np.int64)) if breaks else np.ones(starts.size, bool)
+    return np.stack([starts[keep], starts[keep] + 1], axis=1) if n > 1 else np.zeros((0, 2), np.int64)
 
 
 def decided_graph(topomap, decided_since: bool = False) -> DecidedGraph:
@@ -62,7 +83,7 @@ def decided_graph(topomap, decided_since: bool = False) -> DecidedGraph:
     index = {node: int(d["index"]) for node, d in topomap.graph.nodes(data=True)}
     loops = np.array([(index[u], index[v]) for u, v, _a in topomap.loops(KEPT)],
                      dtype=np.int64).reshape(-1, 2)
-    return DecidedGraph(n, loops, estimated)
+    return DecidedGraph(n, loops, estimated, chain_breaks(topomap))
 
 
 def solve_layout(graph: DecidedGraph, start: Optional[np.ndarray] = None) -> np.ndarray:
@@ -74,13 +95,14 @@ def solve_layout(graph: DecidedGraph, start: Optional[np.ndarray] = None) -> np.
         return np.zeros((n, 2))
     if n > EMBED_MAX_NODES:
         xy = serpentine(n)
-    elif graph.loops.size == 0:
-        xy = np.stack([np.arange(n, dtype=np.float64), np.zeros(n)], axis=1)  # nothing to fold
+    elif graph.loops.size == 0:   # nothing to fold: each recording a straight row of its own
+        chain = np.searchsorted(np.asarray(graph.breaks, np.int64), np.arange(n), side="right")
+        first = np.concatenate([[0], np.asarray(graph.breaks, np.int64)])[chain]
+        xy = np.stack([np.arange(n, dtype=np.float64) - first, -4.0 * chain], axis=1)
     else:
-        path = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
-        xy = _distance_layout(n, np.concatenate([path, graph.loops]),
+        xy = _distance_layout(n, np.concatenate([path_pairs(n, graph.breaks), graph.loops]),
                               start if start is not None and start.shape == (n, 2) else None)
-    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    steps = np.linalg.norm(xy[path_pairs(n, graph.breaks)[:, 1]] - xy[path_pairs(n, graph.breaks)[:, 0]], axis=1)
     scale = float(np.median(steps)) if steps.size and np.median(steps) > 0 else 1.0
     return (xy - xy.mean(axis=0)) / scale
 

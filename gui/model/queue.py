@@ -7,6 +7,11 @@ the cosine similarity; then inliers), filters and counts them by status and by k
 them: candidate, auto, manual), and applies decisions, alone or in bulk, each action
 one undo step.
 
+In a site (several recordings) the queue holds the loops within and across every
+recording, and filters them by the pair of recordings they join (``pair``: ("A", "B")
+for loops between A and B, ("A", "A") for A's own; ``pair_choices`` lists the pairs
+with their counts, for a filter such as "A × B (3)").
+
 The rule behind every decision: it applies to the loops that are *selected*
 (``select``), which the window shows selected, and to nothing else. After a decision
 the selection advances to the next row *below* in the order the user sees; after the
@@ -24,6 +29,20 @@ from .document import DECIDED, STATUSES, UNDECIDED, LoopRow, MapDocument
 from .loop_key import LoopKey
 
 KINDS = ("candidate", "auto", "manual")
+Pair = tuple[str, str]
+
+
+def in_pair(row: LoopRow, pair: Optional[Pair]) -> bool:
+    """Does ``row`` join the recordings of ``pair`` (either way round)? None: every row."""
+    if pair is None:
+        return True
+    if row.sessions is None:
+        return False
+    return tuple(row.sessions) == tuple(pair) or tuple(row.sessions) == (pair[1], pair[0])
+
+
+def pair_text(pair: Pair) -> str:
+    return f"{pair[0]} × {pair[1]}"
 
 
 def rank_key(row: LoopRow) -> tuple:
@@ -41,16 +60,37 @@ class ReviewQueue:
         self.advance_after_decision = True
 
     # -- the list ---------------------------------------------------------------
-    def rows(self, statuses: Optional[Iterable[str]] = None, kinds: Optional[Iterable[str]] = None) -> list[LoopRow]:
-        """The loops ranked by evidence, only those with these statuses and kinds (None: all)."""
+    def rows(self, statuses: Optional[Iterable[str]] = None, kinds: Optional[Iterable[str]] = None,
+             pair: Optional[Pair] = None) -> list[LoopRow]:
+        """The loops ranked by evidence, only those with these statuses and kinds and (a site)
+        between this pair of recordings (None: all)."""
         wanted_s = None if statuses is None else set(statuses)
         wanted_k = None if kinds is None else set(kinds)
         rows = [r for r in self.doc.loop_rows()
-                if (wanted_s is None or r.status in wanted_s) and (wanted_k is None or r.tier in wanted_k)]
+                if (wanted_s is None or r.status in wanted_s) and (wanted_k is None or r.tier in wanted_k)
+                and in_pair(r, pair)]
         return sorted(rows, key=rank_key)
 
-    def keys(self, statuses: Optional[Iterable[str]] = None, kinds: Optional[Iterable[str]] = None) -> list[LoopKey]:
-        return [r.key for r in self.rows(statuses, kinds)]
+    def keys(self, statuses: Optional[Iterable[str]] = None, kinds: Optional[Iterable[str]] = None,
+             pair: Optional[Pair] = None) -> list[LoopKey]:
+        return [r.key for r in self.rows(statuses, kinds, pair)]
+
+    def pair_choices(self) -> list[tuple[str, Optional[Pair], int, int]]:
+        """The pair filter's choices: (text, pair, loops, undecided), "All recordings" (None)
+        first, then every pair of recordings of the site in its order ([] for one recording)."""
+        site = self.doc.site
+        if site is None:
+            return []
+        counts: dict = {p: [0, 0] for p in site.pairs()}
+        for r in self.doc.loop_rows():
+            if r.sessions is not None:
+                c = counts.setdefault(tuple(r.sessions), [0, 0])
+                c[0] += 1
+                c[1] += r.undecided
+        total = sum(c[0] for c in counts.values())
+        undecided = sum(c[1] for c in counts.values())
+        return [("All recordings", None, total, undecided)] + [
+            (pair_text(p), p, c[0], c[1]) for p, c in counts.items()]
 
     def counts(self) -> dict[str, dict[str, int]]:
         """{"status": {status: n}, "kind": {kind: n}, "undecided": {"undecided": n}} over every loop."""
