@@ -34,8 +34,14 @@ def make_site_files(root: Path, n: int = FRAMES, seed: int = 0) -> dict:
     root = Path(root)
     root.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
-    places = rng.normal(size=(n, 64)).cumsum(axis=0)
-    worlds = {"A": places, "B": places[::-1].copy(), "C": rng.normal(size=(n, 64)).cumsum(axis=0) + 40.0}
+
+    def places(m: int) -> np.ndarray:   # a place each, a little like the one before
+        r = rng.normal(size=(m + 1, 64))
+        return r[1:] + 0.5 * r[:-1]
+
+    route = places(n - 5)
+    route = np.concatenate([route, route[:5]])          # A comes back to where it started
+    worlds = {"A": route, "B": route[::-1].copy(), "C": places(n)}
     out = {}
     for k, name in enumerate(NAMES):
         folder = root / f"{name}_frames"
@@ -46,7 +52,8 @@ def make_site_files(root: Path, n: int = FRAMES, seed: int = 0) -> dict:
             img[..., 0], img[..., 1] = frame_code(k, f)
             img[..., 2] = np.roll(texture, 3 * f, axis=1)
             Image.fromarray(img).save(folder / f"frame_{f:04d}.png")
-        vectors = worlds[name] + rng.normal(scale=0.3, size=worlds[name].shape)
+        base = worlds[name]
+        vectors = base + 0.7 / 8.0 * np.linalg.norm(base, axis=1, keepdims=True) * rng.normal(size=base.shape)
         vectors /= np.linalg.norm(vectors, axis=1, keepdims=True)
         npz = root / f"{name}.npz"
         Descriptors(stamps=np.arange(n, dtype=np.float64), frames=np.arange(n, dtype=np.int64),
@@ -149,6 +156,8 @@ def test_decisions_on_a_site_name_each_recording_and_replay(files):
     place = doc.node_place(row.index_v)
     doc.push(SetLabel(place, "", "stairs"))
     status, label = book.records
+    for r in doc.loop_rows():   # after an edit, as before: every key names its rows' recordings
+        assert sorted(doc.site.local(f)[0] for f in r.key) == sorted(r.sessions)
     assert sorted(status["sessions"]) == ["A.npz", "B.npz"] and status["status"] == "confirmed"
     assert label["session"] == "B.npz" and doc.site.local(place) == ("B.npz", label["frame"])
     assert all(f < FRAMES for f in status["frames"])              # each recording's own frame, never a site frame
@@ -167,7 +176,7 @@ def test_decisions_on_a_site_name_each_recording_and_replay(files):
 def test_a_site_whose_recording_is_gone_is_one_line(files, tmp_path):
     from gui.model.site import plan_site
 
-    copied = make_site_files(tmp_path / "moved", n=8)
+    copied = make_site_files(tmp_path / "moved", n=12)
     from engine.site import map_site
 
     site_file = tmp_path / "moved" / "site.graphml"

@@ -420,7 +420,7 @@ class MapDocument:
         return self._rows
 
     def _make_loop_rows(self) -> list[LoopRow]:
-        return [] if self.topomap is None else make_loop_rows(self.topomap, self._tiers)
+        return [] if self.topomap is None else make_loop_rows(self.topomap, self._tiers, self.site)
 
     def prepared(self, name: str, fallback: Callable):
         """What preparer ``name`` computed for the current map, else ``fallback(topomap)`` now."""
