@@ -210,11 +210,13 @@ PARAMETERS: tuple[Parameter, ...] = (
               "sigma = DOP x the user equivalent range error (Kaplan and Hegarty, Understanding GPS); "
               "single-frequency receivers' range error is about 2 m (signal under 1 m, plus "
               "atmosphere and multipath)", 0.01, 1e3),
-    Parameter("gps_spacing_m", float, 5.0, _NEW,
-              "GPS position factors in the pose graph: at its key nodes and at least one every this "
-              "many metres along the path (fewer factors keep long recordings fast)",
-              "about the spread of one fix (gps_sigma_m): fixes closer together repeat one slowly "
-              "changing error; 100,000 nodes 1 m apart make 20,000 factors", 0.1, 1e5),
+    Parameter("gps_spacing_m", float, 20.0, _NEW,
+              "GPS position factors in the pose graph: at its key nodes and one every this many "
+              "metres along the path (wider on a long recording: at most 2,000 more key nodes, or "
+              "as many as the graph has)",
+              "a GPS error changes over tens of seconds (multipath, atmosphere): fixes closer "
+              "together repeat one error, and counted many times it could outvote a true loop "
+              "whose two visits' fixes are a few metres off; 20 m is 15-25 s at walking pace", 0.1, 1e5),
     Parameter("gps_scale_span_m", float, 25.0, _NEW,
               "without odometry, the image steps' length in metres is the GPS distance over the "
               "image path's own, measured between GPS fixes at least this far apart",
