@@ -13,6 +13,15 @@ Here every question is answered with memory bounded whatever n:
 * ``calibrated`` / ``pair_z``: symmetric z-scores of candidate pairs against both rows'
   backgrounds (the same formula as ``engine.calibrate.zscores``, without the matrix).
 * ``diagonal_support``: the mean z-score along a matched stretch, forward or reverse.
+
+Several recordings (a site) are *segments* of the rows (``segment``: one label per row,
+each recording's rows contiguous). Temporal neighbours exist only within a recording;
+``nearest`` gives every row its best matches in each recording, and ``background`` keeps
+each row's statistics against each recording, so a pair across two recordings is judged
+against what "a different place" looks like between those two (another day's light lowers
+every similarity across the days alike; pooled with the rows of its own day, a true match
+across the days scored a median 1.6 standard deviations, against 3.7 calibrated per
+pair of recordings; docs/method.md).
 """
 
 from __future__ import annotations
@@ -41,6 +50,9 @@ EXACT_MAX_COST = 2e11
 # Columns sampled per row for the background: the median of 1024 values has a standard
 # error of 1.25 / sqrt(1024), about 4% of the spread (the brief asked for >= 1024).
 BACKGROUND_SAMPLE = 1024
+# Several recordings: BACKGROUND_SAMPLE is shared among them, never fewer than this per
+# recording (the median's standard error is then 1.25 / sqrt(256): 8% of the spread).
+MIN_SAMPLE_PER_RECORDING = 256
 # MAD -> standard deviation for a normal distribution; spread floor against division by 0.
 _SD_FLOOR = 1e-3
 
@@ -57,10 +69,35 @@ class Neighbours:
 
 @dataclass(frozen=True)
 class Background:
-    """Per-row background of similarities to rows outside the temporal window."""
-    mean: np.ndarray    # (n,) float32, robust centre (median)
-    std: np.ndarray     # (n,) float32, robust spread (1.4826 * MAD, floored at 1e-3)
+    """Per-row background of similarities to rows outside the temporal window, against
+    each recording (column s: the rows of segment s)."""
+    mean: np.ndarray    # (n, S) float32, robust centre (median)
+    std: np.ndarray     # (n, S) float32, robust spread (1.4826 * MAD, floored at 1e-3)
     exclude: int        # the temporal window the statistics left out
+    segment: np.ndarray = None  # (n,) int64 recording of each row (all 0: one recording)
+
+    def __post_init__(self):
+        if self.segment is None:
+            object.__setattr__(self, "segment", np.zeros(self.mean.shape[0], np.int64))
+        if self.mean.ndim == 1:
+            object.__setattr__(self, "mean", self.mean[:, None])
+            object.__setattr__(self, "std", self.std[:, None])
+
+
+def segment_labels(n: int, segment: Optional[np.ndarray]) -> np.ndarray:
+    """(n,) int64 recording labels 0..S-1 (all 0 when ``segment`` is None); refused unless
+    each recording's rows are contiguous and in order."""
+    if segment is None:
+        return np.zeros(n, np.int64)
+    seg = np.asarray(segment, np.int64)
+    if seg.shape != (n,) or (seg.size and (seg[0] != 0 or np.any(np.diff(seg) < 0) or np.any(np.diff(seg) > 1))):
+        raise ValueError("segment must label contiguous recordings 0, 1, ... in row order")
+    return seg
+
+
+def temporal_neighbours(a: np.ndarray, b: np.ndarray, exclude: int, segment: np.ndarray) -> np.ndarray:
+    """True where rows a and b are within ``exclude`` rows of each other in one recording."""
+    return (np.abs(a - b) <= exclude) & (segment[a] == segment[b])
 
 
 def block_rows_for(n: int, budget: int = BLOCK_ELEMENTS) -> int:
@@ -79,13 +116,14 @@ def pair_similarities(vectors: np.ndarray, a: np.ndarray, b: np.ndarray, chunk: 
     return out
 
 
-def _mask_window(sims: np.ndarray, r0: int, exclude: int, value: float) -> None:
-    """Set sims[i - r0, j] = value for |i - j| <= exclude (in place; rows r0..r0+len)."""
+def _mask_window(sims: np.ndarray, r0: int, exclude: int, value: float, segment: np.ndarray) -> None:
+    """Set sims[i - r0, j] = value for temporal neighbours i, j (in place; rows r0..r0+len)."""
     rows = np.arange(sims.shape[0])
     n = sims.shape[1]
     for off in range(-exclude, exclude + 1):
         cols = rows + r0 + off
         ok = (cols >= 0) & (cols < n)
+        ok[ok] &= segment[rows[ok] + r0] == segment[cols[ok]]
         sims[rows[ok], cols[ok]] = value
 
 
@@ -93,27 +131,43 @@ def _empty(n: int, k: int) -> Neighbours:
     return Neighbours(np.full((n, k), -1, np.int64), np.full((n, k), np.nan, np.float32))
 
 
-def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int]) -> Neighbours:
+def _top_k(sims: np.ndarray, kk: int) -> tuple[np.ndarray, np.ndarray]:
+    """(index, sim) of each row's kk largest entries, best first; -1 / NaN where not finite."""
+    w = sims.shape[1]
+    top = np.argpartition(sims, w - kk, axis=1)[:, w - kk:] if kk < w else np.tile(np.arange(w), (sims.shape[0], 1))
+    s = np.take_along_axis(sims, top, axis=1)
+    order = np.argsort(-s, axis=1, kind="stable")
+    top = np.take_along_axis(top, order, axis=1)
+    s = np.take_along_axis(s, order, axis=1)
+    bad = ~np.isfinite(s)
+    top[bad] = -1
+    s[bad] = np.nan
+    return top, s
+
+
+def _segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
+    starts = np.flatnonzero(np.diff(np.concatenate([[-1], segment])) != 0)
+    ends = np.concatenate([starts[1:], [segment.size]])
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
+def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int], segment: np.ndarray) -> Neighbours:
+    """k per recording: columns [s * k, (s + 1) * k) hold the best rows of recording s."""
     n = v.shape[0]
-    out = _empty(n, k)
-    kk = min(k, n)
-    if kk == 0:
+    bounds = _segment_bounds(segment)
+    out = _empty(n, k * len(bounds))
+    if n == 0 or k == 0:
         return out
     rows = block_rows_for(n) if block_rows is None else max(1, int(block_rows))
     for r0 in range(0, n, rows):
         r1 = min(n, r0 + rows)
         sims = v[r0:r1] @ v.T
-        _mask_window(sims, r0, exclude, -np.inf)
-        top = np.argpartition(sims, n - kk, axis=1)[:, n - kk:] if kk < n else np.tile(np.arange(n), (r1 - r0, 1))
-        s = np.take_along_axis(sims, top, axis=1)
-        order = np.argsort(-s, axis=1, kind="stable")
-        top = np.take_along_axis(top, order, axis=1)
-        s = np.take_along_axis(s, order, axis=1)
-        bad = ~np.isfinite(s)
-        top[bad] = -1
-        s[bad] = np.nan
-        out.index[r0:r1, :kk] = top
-        out.sim[r0:r1, :kk] = s
+        _mask_window(sims, r0, exclude, -np.inf, segment)
+        for s, (c0, c1) in enumerate(bounds):
+            kk = min(k, c1 - c0)
+            top, sim = _top_k(sims[:, c0:c1], kk)
+            out.index[r0:r1, s * k:s * k + kk] = np.where(top >= 0, top + c0, -1)
+            out.sim[r0:r1, s * k:s * k + kk] = sim
     return out
 
 
@@ -157,8 +211,11 @@ def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndar
     return centres.astype(np.float32)
 
 
-def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: Optional[int] = None, seed: int = 0) -> Neighbours:
+def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, nprobe: Optional[int] = None,
+                 seed: int = 0) -> Neighbours:
+    """k per recording, as ``_exact``, from the cells each query probes."""
     n = v.shape[0]
+    n_seg = int(segment[-1]) + 1
     nprobe = NPROBE if nprobe is None else nprobe
     cells = int(max(1, min(n // 4, round(n / CELL_ROWS))))
     nprobe = int(min(nprobe, cells))
@@ -177,14 +234,15 @@ def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: Optional[int] = No
             np.tile(np.arange(cells), (sc.shape[0], 1))
         probes[r0:r0 + rows] = top
         cell[r0:r0 + rows] = np.argmax(sc, axis=1)
-    members_order = np.argsort(cell, kind="stable")
+    members_order = np.argsort(cell, kind="stable")   # rows in order within a cell: recordings contiguous
     member_start = np.searchsorted(cell[members_order], np.arange(cells + 1))
     flat = probes.ravel()
     probe_order = np.argsort(flat, kind="stable")
     probe_start = np.searchsorted(flat[probe_order], np.arange(cells + 1))
-    # Candidates: k per (query, probed cell), in the query's slot for that probe.
-    cand_i = np.full((n, nprobe * k), -1, np.int64)
-    cand_s = np.full((n, nprobe * k), -np.inf, np.float32)
+    # Candidates: k per (query, recording, probed cell), in the query's slot for that probe.
+    width = nprobe * k
+    cand_i = np.full((n, n_seg * width), -1, np.int64)
+    cand_s = np.full((n, n_seg * width), -np.inf, np.float32)
     for c in range(cells):
         mem = members_order[member_start[c]:member_start[c + 1]]
         hits = probe_order[probe_start[c]:probe_start[c + 1]]
@@ -192,29 +250,26 @@ def _approximate(v: np.ndarray, k: int, exclude: int, nprobe: Optional[int] = No
             continue
         q_all, slot_all = hits // nprobe, hits % nprobe
         vm = v[mem]
+        parts = _segment_bounds(segment[mem])
         step = block_rows_for(mem.size)
         for h0 in range(0, q_all.size, step):
             q, slot = q_all[h0:h0 + step], slot_all[h0:h0 + step]
             sims = v[q] @ vm.T
-            sims[np.abs(q[:, None] - mem[None, :]) <= exclude] = -np.inf
-            kk = min(k, mem.size)
-            top = np.argpartition(sims, mem.size - kk, axis=1)[:, mem.size - kk:]
-            cols = slot[:, None] * k + np.arange(kk)[None, :]
-            cand_i[q[:, None], cols] = mem[top]
-            cand_s[q[:, None], cols] = np.take_along_axis(sims, top, axis=1)
-    out = _empty(n, k)
-    kk = min(k, cand_s.shape[1])
-    top = np.argpartition(cand_s, cand_s.shape[1] - kk, axis=1)[:, cand_s.shape[1] - kk:]
-    s = np.take_along_axis(cand_s, top, axis=1)
-    order = np.argsort(-s, axis=1, kind="stable")
-    top = np.take_along_axis(top, order, axis=1)
-    s = np.take_along_axis(s, order, axis=1)
-    idx = np.take_along_axis(cand_i, top, axis=1)
-    miss = ~np.isfinite(s)
-    idx[miss] = -1
-    s[miss] = np.nan
-    out.index[:, :kk] = idx
-    out.sim[:, :kk] = s
+            sims[temporal_neighbours(q[:, None], mem[None, :], exclude, segment)] = -np.inf
+            for m0, m1 in parts:
+                s = int(segment[mem[m0]])
+                kk = min(k, m1 - m0)
+                top = np.argpartition(sims[:, m0:m1], m1 - m0 - kk, axis=1)[:, m1 - m0 - kk:]
+                cols = s * width + slot[:, None] * k + np.arange(kk)[None, :]
+                cand_i[q[:, None], cols] = mem[m0 + top]
+                cand_s[q[:, None], cols] = np.take_along_axis(sims[:, m0:m1], top, axis=1)
+    out = _empty(n, k * n_seg)
+    for s in range(n_seg):
+        kk = min(k, width)
+        top, sim = _top_k(cand_s[:, s * width:(s + 1) * width], kk)
+        idx = np.take_along_axis(cand_i[:, s * width:(s + 1) * width], np.maximum(top, 0), axis=1)
+        out.index[:, s * k:s * k + kk] = np.where(top >= 0, idx, -1)
+        out.sim[:, s * k:s * k + kk] = sim
     return out
 
 
@@ -226,8 +281,10 @@ def choose_method(n: int, d: int) -> str:
 
 
 def nearest(vectors: np.ndarray, k: int, exclude: int, *, block_rows: Optional[int] = None,
-            method: str = "auto") -> Neighbours:
-    """For every row i its k most similar rows j with |i - j| > exclude, best first.
+            method: str = "auto", segment: Optional[np.ndarray] = None) -> Neighbours:
+    """For every row i its k most similar rows j with |i - j| > exclude, best first; with
+    several recordings (``segment``) its k best in each recording, recording s in columns
+    [s * k, (s + 1) * k), the temporal window only within a recording.
 
     ``vectors`` (n, d) are L2-normalised rows (cosine = dot product). ``method``:
     "exact" (blocked matrix products, memory rows * n <= BLOCK_ELEMENTS), "approximate"
@@ -242,11 +299,12 @@ def nearest(vectors: np.ndarray, k: int, exclude: int, *, block_rows: Optional[i
     n, d = v.shape
     k = int(k)
     exclude = max(0, int(exclude))
+    segment = segment_labels(n, segment)
     if method == "auto":
         method = choose_method(n, d)
     if method == "approximate" and n > 4 * CELL_ROWS:
-        return _approximate(v, k, exclude)
-    return _exact(v, k, exclude, block_rows)
+        return _approximate(v, k, exclude, segment)
+    return _exact(v, k, exclude, block_rows, segment)
 
 
 def sample_columns(n: int, size: int = BACKGROUND_SAMPLE, seed: int = 0) -> np.ndarray:
@@ -256,63 +314,73 @@ def sample_columns(n: int, size: int = BACKGROUND_SAMPLE, seed: int = 0) -> np.n
     return np.sort(np.random.default_rng(seed).choice(n, size, replace=False))
 
 
-def sampled_similarities(vectors: np.ndarray, cols: np.ndarray, exclude: int):
-    """Yield (r0, r1, block) with block = v[r0:r1] @ v[cols].T as float32, NaN where
-    |row - col| <= exclude: the (n, len(cols)) matrix one row block at a time."""
+def sampled_similarities(vectors: np.ndarray, cols: np.ndarray, exclude: int, segment: Optional[np.ndarray] = None):
+    """Yield (r0, r1, block) with block = v[r0:r1] @ v[cols].T as float32, NaN where row and
+    column are temporal neighbours: the (n, len(cols)) matrix one row block at a time."""
     v = np.asarray(vectors, dtype=np.float32)
     n = v.shape[0]
+    segment = segment_labels(n, segment)
     vc = v[cols]
     rows = block_rows_for(max(len(cols), 1) * 16)   # blocks of at most BLOCK_ELEMENTS / 16
     for r0 in range(0, n, rows):
         r1 = min(n, r0 + rows)
         block = v[r0:r1] @ vc.T
-        near = np.abs(np.arange(r0, r1)[:, None] - cols[None, :]) <= exclude
-        block[near] = np.nan
+        block[temporal_neighbours(np.arange(r0, r1)[:, None], cols[None, :], exclude, segment)] = np.nan
         yield r0, r1, block
 
 
-def background(vectors: np.ndarray, exclude: int, sample: int = BACKGROUND_SAMPLE, seed: int = 0) -> Background:
-    """Each row's median and MAD spread of its similarities to a random column sample.
+def background(vectors: np.ndarray, exclude: int, sample: int = BACKGROUND_SAMPLE, seed: int = 0,
+               segment: Optional[np.ndarray] = None) -> Background:
+    """Each row's median and MAD spread of its similarities to a random column sample, for
+    each recording (``segment``) apart.
 
-    The columns are one fixed random sample of ``sample`` rows (seeded, the same for
-    every row) rather than the exact search blocks: it costs n * sample * d, is the same
-    for the exact and approximate paths, and a robust statistic of 1024 values is as
-    good as of all n. Columns within ``exclude`` of the row are left out; revisits are a
-    few per row at most, so median and MAD ignore them. Rows with no distant column get
-    the statistics of all sampled values.
+    The columns are one fixed random sample of ``sample`` rows per recording (seeded, the
+    same for every row; ``sample // S`` per recording with S recordings, at least
+    ``MIN_SAMPLE_PER_RECORDING``) rather than the exact search blocks: it costs
+    n * sample * d, is the same for the exact and approximate paths, and a robust
+    statistic of 1024 values is as good as of all n. Columns within ``exclude`` of the row
+    are left out; revisits are a few per row at most, so median and MAD ignore them. Rows
+    with no distant column in a recording get the statistics of all values sampled there.
     """
     import warnings
 
     v = np.asarray(vectors, dtype=np.float32)
     n = v.shape[0]
-    mean = np.zeros(n, np.float32)
-    std = np.ones(n, np.float32)
-    cols = sample_columns(n, sample, seed)
-    pooled = []
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        for r0, r1, block in sampled_similarities(v, cols, exclude):
-            mu, sd = robust_stats(block, axis=1)
-            mean[r0:r1], std[r0:r1] = mu, sd
-            pooled.append(block[::max(1, (r1 - r0) // 64)].ravel())
-    allv = np.concatenate(pooled) if pooled else np.zeros(0, np.float32)
-    allv = allv[~np.isnan(allv)]
-    if allv.size:
-        g_mu, g_sd = robust_stats(allv.astype(np.float64))
-        miss = np.isnan(mean)
-        mean[miss], std[miss] = g_mu, g_sd
-    else:
-        mean[:], std[:] = 0.0, 1.0
-    return Background(mean.astype(np.float32), np.maximum(std, _SD_FLOOR).astype(np.float32), int(exclude))
+    segment = segment_labels(n, segment)
+    bounds = _segment_bounds(segment) if n else [(0, 0)]
+    per = sample if len(bounds) == 1 else max(MIN_SAMPLE_PER_RECORDING, sample // len(bounds))
+    mean = np.zeros((n, len(bounds)), np.float32)
+    std = np.ones((n, len(bounds)), np.float32)
+    for s, (c0, c1) in enumerate(bounds):
+        cols = c0 + sample_columns(c1 - c0, per, seed)
+        pooled = []
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            for r0, r1, block in sampled_similarities(v, cols, exclude, segment):
+                mu, sd = robust_stats(block, axis=1)
+                mean[r0:r1, s], std[r0:r1, s] = mu, sd
+                pooled.append(block[::max(1, (r1 - r0) // 64)].ravel())
+        allv = np.concatenate(pooled) if pooled else np.zeros(0, np.float32)
+        allv = allv[~np.isnan(allv)]
+        if allv.size:
+            g_mu, g_sd = robust_stats(allv.astype(np.float64))
+            miss = np.isnan(mean[:, s])
+            mean[miss, s], std[miss, s] = g_mu, g_sd
+        else:
+            mean[:, s], std[:, s] = 0.0, 1.0
+    return Background(mean.astype(np.float32), np.maximum(std, _SD_FLOOR).astype(np.float32), int(exclude),
+                      segment)
 
 
 def zscores(sims: np.ndarray, stats: Background, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Symmetric z of pair (a, b): sim against the mean of both backgrounds,
     z = (s - (mu_a + mu_b) / 2) / sqrt((sd_a^2 + sd_b^2) / 2). A pair is one place
     seen twice, so both rows' ideas of "different place" count equally, and z(a, b) ==
-    z(b, a). Same formula as engine.calibrate.zscores."""
-    mu = 0.5 * (stats.mean[a] + stats.mean[b])
-    sd = np.sqrt(0.5 * (stats.std[a] ** 2 + stats.std[b] ** 2))
+    z(b, a). Same formula as engine.calibrate.zscores. Each row's background is the one
+    against the other row's recording."""
+    seg = stats.segment
+    mu = 0.5 * (stats.mean[a, seg[b]] + stats.mean[b, seg[a]])
+    sd = np.sqrt(0.5 * (stats.std[a, seg[b]] ** 2 + stats.std[b, seg[a]] ** 2))
     return ((sims - mu) / sd).astype(np.float32)
 
 
@@ -339,8 +407,8 @@ def diagonal_support(vectors: np.ndarray, stats: Background, a: np.ndarray, b: n
     """Mean z of the pairs (a + t, b + direction * t), 0 < |t| <= half, and how many were used.
 
     ``direction`` +1: the stretch around a is driven again the same way around b; -1: in
-    reverse. Pairs outside [0, n) or within ``stats.exclude`` of each other in time are
-    skipped; a pair with none left gets NaN and count 0. Row dot products only.
+    reverse. Pairs that leave a's or b's recording or are temporal neighbours are skipped;
+    a pair with none left gets NaN and count 0. Row dot products only.
     """
     if direction not in (1, -1):
         raise ValueError("direction must be +1 (same way) or -1 (reverse)")
@@ -351,7 +419,10 @@ def diagonal_support(vectors: np.ndarray, stats: Background, a: np.ndarray, b: n
     t = np.concatenate([np.arange(-half, 0), np.arange(1, half + 1)])
     ii = (a[:, None] + t[None, :]).ravel()
     jj = (b[:, None] + direction * t[None, :]).ravel()
-    ok = (ii >= 0) & (ii < n) & (jj >= 0) & (jj < n) & (np.abs(ii - jj) > stats.exclude)
+    seg = stats.segment
+    ok = (ii >= 0) & (ii < n) & (jj >= 0) & (jj < n)
+    ok[ok] &= (seg[ii[ok]] == np.repeat(seg[a], t.size)[ok]) & (seg[jj[ok]] == np.repeat(seg[b], t.size)[ok])
+    ok[ok] &= ~temporal_neighbours(ii[ok], jj[ok], stats.exclude, seg)
     z = np.zeros(ii.size, np.float32)
     z[ok] = pair_z(v, stats, ii[ok], jj[ok])
     ok = ok.reshape(a.size, t.size)

@@ -129,7 +129,7 @@ def test_diagonal_support_skips_pairs_outside_and_near_in_time():
 def test_calibrated_scores_are_symmetric_and_a_revisit_stands_out():
     v, origin = _walk_with_revisits()
     stats = R.background(v, 5)
-    assert stats.mean.shape == (v.shape[0],) and np.all(stats.std > 0)
+    assert stats.mean.shape == (v.shape[0], 1) and np.all(stats.std > 0)
     a, b = np.array([2100, 50]), np.array([origin[2100], 2900])
     np.testing.assert_allclose(R.pair_z(v, stats, a, b), R.pair_z(v, stats, b, a), rtol=1e-5)
     neigh = R.nearest(v, 3, 5, method="exact")
@@ -157,3 +157,58 @@ def test_auto_is_exact_when_small_and_approximate_when_large():
     assert R.choose_method(100_000, 1024) == "approximate"
     with pytest.raises(ValueError):
         R.nearest(_random(10, 4), 2, 1, method="fast")
+
+
+# ------------------------------------------------------------------ several recordings
+
+def _two_days(n: int = 1500, d: int = 64, seed: int = 3):
+    """Day 2 drives day 1's route again under other light: every row a noisy copy of day 1's
+    row (cosine about 0.55, as rendered days measure), so that every similarity across the
+    days is damped alike, while day 1's rows keep their full spread among themselves."""
+    from benchmarks.harness import random_walk_descriptors
+
+    rng = np.random.default_rng(seed)
+    day1 = random_walk_descriptors(n, d, seed, revisit_share=0.0)[0]
+    day2 = _unit(day1 + 1.5 * rng.standard_normal((n, d)) / np.sqrt(d))
+    return np.vstack([day1, day2]).astype(np.float32), np.repeat([0, 1], n)
+
+
+@pytest.mark.parametrize("method", ["exact", "approximate"])
+def test_every_row_gets_its_best_matches_in_each_recording(method):
+    v, seg = _two_days()
+    n = v.shape[0] // 2
+    neigh = R.nearest(v, 5, 5, method=method, segment=seg)
+    assert neigh.index.shape == (2 * n, 10)
+    assert np.all(seg[neigh.index[:, :5][neigh.index[:, :5] >= 0]] == 0)
+    assert np.all(seg[neigh.index[:, 5:][neigh.index[:, 5:] >= 0]] == 1)
+    # the same place on the other day (its copy, or a row beside it) is among the matches there
+    found = np.mean([np.any(np.abs(neigh.index[i, 5:] - (i + n)) <= 3) for i in range(n)])
+    assert found > 0.95
+
+
+def test_the_temporal_window_does_not_cross_from_one_recording_into_the_next():
+    v = _random(40, 8)
+    seg = np.repeat([0, 1], 20)
+    neigh = R.nearest(v, 40, 5, method="exact", segment=seg)
+    assert 20 in neigh.index[19]            # last of one recording, first of the next: no neighbours in time
+    assert 14 not in neigh.index[19]        # within a recording the window holds
+    stats = R.background(v, 5, segment=seg)
+    _, count = R.diagonal_support(v, stats, np.array([19]), np.array([20]), half=3, direction=1)
+    assert count[0] == 0                    # (19 + t, 20 + t) leaves one recording or the other for every t
+
+
+def test_a_match_across_two_days_is_judged_against_the_background_between_those_days():
+    v, seg = _two_days()
+    n = v.shape[0] // 2
+    rows = np.arange(0, n, 7)
+    pooled = R.pair_z(v, R.background(v, 5), rows, rows + n)
+    per_pair = R.pair_z(v, R.background(v, 5, segment=seg), rows, rows + n)
+    assert np.median(per_pair) > np.median(pooled) + 0.3
+    # and a different place on the other day still scores as a different place
+    other = (rows + n // 2) % n + n
+    assert np.median(R.pair_z(v, R.background(v, 5, segment=seg), rows, other)) < 1.0
+
+
+def test_segments_must_be_contiguous_recordings():
+    with pytest.raises(ValueError, match="contiguous"):
+        R.nearest(_random(6, 4), 2, 1, segment=np.array([0, 1, 0, 1, 0, 1]))

@@ -36,9 +36,11 @@ class PairGeometry:
     """Two-view fits of node pairs, cached per frame pair in ``cache`` (kept across re-maps)."""
 
     def __init__(self, features, node_rows: np.ndarray, shifts: np.ndarray, frame_width: int,
-                 columns=None, cache: Optional[dict] = None):
+                 columns=None, cache: Optional[dict] = None, recording: Optional[np.ndarray] = None):
         self.features, self.columns = features, columns
         self.node_rows = np.asarray(node_rows, np.int64)
+        # each node's recording: a node's path neighbours are those of its own recording
+        self.recording = np.zeros(self.node_rows.size, np.int64) if recording is None else np.asarray(recording)
         self.shifts = np.asarray(shifts, np.int64)
         self.frame_width = int(frame_width)
         self.cache = {} if cache is None else cache
@@ -77,6 +79,7 @@ class PairGeometry:
         for step in (-gap, gap):
             other = ends + step
             ok = (other >= 0) & (other < m)
+            ok[ok] &= self.recording[other[ok]] == self.recording[ends[ok]]
             if partners is not None:
                 ok &= other != partners
             if ok.any():
@@ -91,17 +94,18 @@ class PairGeometry:
         direction between them, not the distance; each end's own step is one node step long,
         and triangulating a point seen by both gives the scale (docs/method.md)."""
         store = self.cache.setdefault("distance_steps", {})
-        rows, m = self.node_rows, self.node_rows.size
+        rows, m, rec = self.node_rows, self.node_rows.size, self.recording
         out = np.full(a.size, np.nan)
         for k, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
-            near = tuple(int(rows[n]) if 0 <= n < m else -1 for n in (i - 1, i, i + 1, j - 1, j, j + 1))
+            near = tuple(int(rows[n]) if 0 <= n < m and rec[n] == rec[e] else -1
+                         for n, e in ((i - 1, i), (i, i), (i + 1, i), (j - 1, j), (j, j), (j + 1, j)))
             if near not in store:
                 loop = self.two_view(rows[i], rows[j])
                 ends = []
                 for end, side in ((i, 0), (j, 1)):
                     ratios = []
                     for other in (end - 1, end + 1):
-                        if 0 <= other < m and other not in (i, j):
+                        if 0 <= other < m and rec[other] == rec[end] and other not in (i, j):
                             lo, hi = min(end, other), max(end, other)
                             step = self.two_view(rows[lo], rows[hi])
                             ratios.append(sphere.baseline_ratio(loop, side, step, 0 if lo == end else 1))

@@ -68,6 +68,18 @@ class Steps:
     ambiguous: np.ndarray  # bool: turns more than ambiguous_turn_deg (the loops may outvote it)
 
 
+def recording_of(m: int, chain_starts=(0,)) -> np.ndarray:
+    """(m,) int64: which recording (0, 1, ...) each node belongs to, from the first node of each."""
+    starts = np.unique(np.asarray(chain_starts, np.int64))
+    return (np.searchsorted(starts[starts > 0], np.arange(m), side="right")).astype(np.int64)
+
+
+def temporal_neighbours(a: np.ndarray, b: np.ndarray, within: int, recording: np.ndarray) -> np.ndarray:
+    """True where nodes a and b are at most ``within`` nodes apart in one recording."""
+    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
+    return (np.abs(b - a) <= within) & (recording[a] == recording[b])
+
+
 def wrap_degrees(deg):
     """Angles in degrees wrapped to [-180, 180)."""
     return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0

@@ -1,9 +1,10 @@
 """Stages 1 and 2 of ``verified``: candidate pairs by retrieval, calibrated, with their support.
 
 Stage 1 (``candidates``): each node's best ``retrieval_k`` descriptor matches beyond its
-temporal neighbours (``engine.retrieval``: in blocks, never an n x n array), each cosine
-calibrated as standard deviations above the two nodes' own background (their similarity to
-unrelated nodes), so that one threshold means the same for any descriptor and scene.
+temporal neighbours in each recording (``engine.retrieval``: in blocks, never an n x n
+array), each cosine calibrated as standard deviations above the two nodes' own background
+(their similarity to unrelated nodes of the other's recording), so that one threshold means
+the same for any descriptor, scene and pair of recordings.
 
 Stage 2 (``with_support``): the mean calibrated score along the stretch through each pair,
 forwards (the same way again) and backwards (a reverse drive): the paper's window count,
@@ -19,15 +20,15 @@ from ..params import MapParams
 from .pairs import Pairs
 
 
-def _key(vectors: np.ndarray, *rest) -> tuple:
-    return (vectors.shape, hash(vectors[:, :4].tobytes())) + rest
+def _key(vectors: np.ndarray, recording: np.ndarray, *rest) -> tuple:
+    return (vectors.shape, hash(vectors[:, :4].tobytes()), hash(recording.tobytes())) + rest
 
 
-def background(vectors: np.ndarray, params: MapParams, cache: dict):
-    """Each node's background similarity statistics, cached per node set."""
-    key = ("background",) + _key(vectors, params.neighbor_node_num)
+def background(vectors: np.ndarray, recording: np.ndarray, params: MapParams, cache: dict):
+    """Each node's background similarity statistics against each recording, cached per node set."""
+    key = ("background",) + _key(vectors, recording, params.neighbor_node_num)
     if key not in cache:
-        cache[key] = retrieval.background(vectors, params.neighbor_node_num)
+        cache[key] = retrieval.background(vectors, params.neighbor_node_num, segment=recording)
     return cache[key]
 
 
@@ -37,26 +38,27 @@ def scored(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray) -> Pairs:
     return Pairs(a=a, b=b, cosine=cos, score=retrieval.zscores(cos, stats, a, b))
 
 
-def candidates(vectors: np.ndarray, params: MapParams, cache: dict) -> Pairs:
-    """Stage 1: unique pairs (a < b) of each node's best matches, with cosine and score."""
-    key = ("nearest",) + _key(vectors, params.retrieval_k, params.neighbor_node_num)
+def candidates(vectors: np.ndarray, recording: np.ndarray, params: MapParams, cache: dict) -> Pairs:
+    """Stage 1: unique pairs (a < b) of each node's best matches in each recording
+    (``recording``: one label per node), with cosine and score."""
+    key = ("nearest",) + _key(vectors, recording, params.retrieval_k, params.neighbor_node_num)
     if key not in cache:
-        cache[key] = retrieval.nearest(vectors, params.retrieval_k, params.neighbor_node_num)
+        cache[key] = retrieval.nearest(vectors, params.retrieval_k, params.neighbor_node_num, segment=recording)
     neigh = cache[key]
     m, k = neigh.index.shape
     rows = np.repeat(np.arange(m, dtype=np.int64), k)
     cols = neigh.index.reshape(-1).astype(np.int64)
     ok = cols >= 0
     pair = np.unique(np.minimum(rows[ok], cols[ok]) * m + np.maximum(rows[ok], cols[ok]))
-    return scored(vectors, background(vectors, params, cache), pair // m, pair % m)
+    return scored(vectors, background(vectors, recording, params, cache), pair // m, pair % m)
 
 
-def with_support(vectors: np.ndarray, pairs: Pairs, params: MapParams, cache: dict) -> Pairs:
+def with_support(vectors: np.ndarray, recording: np.ndarray, pairs: Pairs, params: MapParams, cache: dict) -> Pairs:
     """Stage 2: ``pairs`` with ``support`` (the better of the forward and reverse mean
     calibrated score along the stretch; NaN where there is none) and its ``direction``.
     Each pair's two means are cached, so a re-map computes only pairs it has not seen."""
-    stats = background(vectors, params, cache)
-    store = cache.setdefault(("support",) + _key(vectors, params.support_half, params.neighbor_node_num), {})
+    stats = background(vectors, recording, params, cache)
+    store = cache.setdefault(("support",) + _key(vectors, recording, params.support_half, params.neighbor_node_num), {})
     m = vectors.shape[0]
     ids = pairs.a * m + pairs.b
     todo = np.unique(ids[[int(i) not in store for i in ids.tolist()]]) if ids.size else ids

@@ -17,13 +17,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import MapParams
-from .pairs import Pairs, Status
+from .pairs import Pairs, Status, temporal_neighbours
 from .places import PlaceGrid
 from .retrieve import descriptor_rank, scored, with_support
 
 
-def evidence(pairs: Pairs, params: MapParams, count_steps: bool = True) -> dict[str, np.ndarray]:
-    """The named facts the rules combine, one boolean array each (NaN compares False)."""
+def evidence(pairs: Pairs, params: MapParams, count_steps: bool = True,
+             recording: np.ndarray = None) -> dict[str, np.ndarray]:
+    """The named facts the rules combine, one boolean array each (NaN compares False);
+    ``recording``: each node's recording (None: one)."""
+    same = np.ones(len(pairs), bool) if recording is None else recording[pairs.a] == recording[pairs.b]
     step = np.maximum(pairs.step_inliers, 0)
     apart = pairs.distance_steps
     measured = (apart <= params.auto_distance_steps) & (pairs.inliers >= params.auto_measured_share * step)
@@ -33,7 +36,7 @@ def evidence(pairs: Pairs, params: MapParams, count_steps: bool = True) -> dict[
         "geometry": (pairs.inliers >= params.auto_inliers) & one_place & ~(pairs.plane_share > params.auto_plane_share),
         "measured": measured,
         "both": measured & counted,
-        "one_stretch": measured & (pairs.b - pairs.a <= 2 * params.neighbor_node_num + 1),
+        "one_stretch": measured & same & (pairs.b - pairs.a <= 2 * params.neighbor_node_num + 1),
         "no_geometry": (pairs.inliers < 0) & (np.nan_to_num(pairs.support, nan=-np.inf) >= params.auto_support),
     }
 
@@ -57,11 +60,12 @@ def _score_needed(name: str, params: MapParams) -> float:
     return float(getattr(params, name))
 
 
-def tiers(pairs: Pairs, params: MapParams, count_steps: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def tiers(pairs: Pairs, params: MapParams, count_steps: bool = True,
+          recording: np.ndarray = None) -> tuple[np.ndarray, np.ndarray]:
     """Stage 5: (status, rule) per pair: ``Status`` values and the name of the first
     ``AUTO_RULES`` row that made it automatic ("" otherwise). ``count_steps=False`` judges
-    by the measured distance alone (stage 6)."""
-    facts = evidence(pairs, params, count_steps)
+    by the measured distance alone (stage 6). ``recording``: each node's recording."""
+    facts = evidence(pairs, params, count_steps, recording)
     rule = np.full(len(pairs), "", dtype=object)
     for name, needs, score in AUTO_RULES:
         holds = np.logical_and.reduce([facts[f] for f in needs]) & (pairs.score >= _score_needed(score, params))
@@ -106,7 +110,7 @@ def _set_aside_for(pairs: Pairs, todo: np.ndarray, set_aside: Pairs, radius: int
 
 
 def nearest(pairs: Pairs, status: np.ndarray, rule: np.ndarray, set_aside: Pairs, vectors: np.ndarray,
-            geometry, params: MapParams, cache: dict):
+            recording: np.ndarray, geometry, params: MapParams, cache: dict):
     """Stage 6: each pair not automatic moves to the pair of its place whose views measure
     closest, among those that pass stage 5 by the measured distance alone; it then is that
     pair (status auto, rule "nearest pair of the place"). The pairs of its place: those stage
@@ -125,13 +129,15 @@ def nearest(pairs: Pairs, status: np.ndarray, rule: np.ndarray, set_aside: Pairs
     aside = np.concatenate([np.zeros(owner.size, bool), np.ones(so.size, bool)])
     _, first = np.unique(stacked, axis=0, return_index=True)
     owner, na, nb, aside = stacked[first, 0], stacked[first, 1], stacked[first, 2], aside[first]
-    ok = (na >= 0) & (nb < m) & (nb - na > params.neighbor_node_num)
+    ok = (na >= 0) & (nb < m) & (nb > na)
+    ok[ok] &= ~temporal_neighbours(na[ok], nb[ok], params.neighbor_node_num, recording)
     owner, na, nb, aside = owner[ok], na[ok], nb[ok], aside[ok]
     if owner.size == 0:
         return pairs, status, rule
-    near = with_support(vectors, scored(vectors, background(vectors, params, cache), na, nb), params, cache)
+    stats = background(vectors, recording, params, cache)
+    near = with_support(vectors, recording, scored(vectors, stats, na, nb), params, cache)
     near = geometry.measure(near, params)
-    close = tiers(near, params, count_steps=False)[0] == Status.AUTO.value
+    close = tiers(near, params, count_steps=False, recording=recording)[0] == Status.AUTO.value
     pairs, status, rule = pairs.take(np.arange(len(pairs))), status.copy(), rule.copy()
     closed = PlaceGrid(params.place_radius)
     for x, y in zip(pairs.a[status == Status.AUTO.value].tolist(), pairs.b[status == Status.AUTO.value].tolist()):

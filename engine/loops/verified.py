@@ -27,7 +27,7 @@ import numpy as np
 from ..params import MapParams
 from . import pose_graph
 from .geometry import PairGeometry
-from .pairs import LoopCandidate, Pairs, Status
+from .pairs import LoopCandidate, Pairs, Status, recording_of
 from .places import one_per_place
 from .retrieve import candidates, descriptor_rank, with_support
 from .tiers import nearest, tiers
@@ -55,18 +55,19 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     v = np.asarray(vectors, np.float32)
     m = v.shape[0]
     shifts = np.zeros(m, np.int64) if shifts is None else np.asarray(shifts, np.int64)
-    geometry = PairGeometry(features, node_rows, shifts, frame_width, columns, cache)
+    recording = recording_of(m, chain_starts)
+    geometry = PairGeometry(features, node_rows, shifts, frame_width, columns, cache, recording)
     if m <= params.neighbor_node_num + 1:
         return LoopResult([], _path_only(geometry, params, m, chain_starts, metric))
-    pairs = with_support(v, candidates(v, params, cache), params, cache)              # 1, 2
+    pairs = with_support(v, recording, candidates(v, recording, params, cache), params, cache)    # 1, 2
     floor = params.candidate_z - params.geometry_margin_z
     pairs = pairs.take((pairs.score >= floor) | (np.nan_to_num(pairs.support, nan=-np.inf) >= floor))
     pairs.confidence = descriptor_rank(pairs)
     kept = one_per_place(pairs, params.place_radius)                                 # 3
     set_aside, pairs = pairs.take(~kept), pairs.take(kept)
     pairs = geometry.measure(pairs, params)                                         # 4
-    status, rule = tiers(pairs, params)                                             # 5
-    pairs, status, rule = nearest(pairs, status, rule, set_aside, v, geometry, params, cache)   # 6
+    status, rule = tiers(pairs, params, recording=recording)                        # 5
+    pairs, status, rule = nearest(pairs, status, rule, set_aside, v, recording, geometry, params, cache)   # 6
     status, reason, closure, poses = consistent(pairs, status, geometry, params, m, chain_starts, metric)  # 7
     out = [LoopCandidate(a=int(pairs.a[i]), b=int(pairs.b[i]), similarity=float(pairs.cosine[i]), window_count=0,
                          yaw=float(pairs.yaw[i]) if np.isfinite(pairs.yaw[i]) else None,
