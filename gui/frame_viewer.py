@@ -258,13 +258,13 @@ class FrameViewer(QWidget):
         if item is None:
             return
         site = self.doc.site
+        stamp = f" &nbsp; · &nbsp; t = {item.stamp:.2f} s"
         if site is None:
-            text = f"<b>frame {item.index}</b> / {self.cache.frame_count - 1} &nbsp; · &nbsp; t = {item.stamp:.2f} s"
-        else:   # a site: the recording the frame belongs to, and its own frame number
+            text, stamp = f"<b>frame {item.index}</b> / {self.cache.frame_count - 1}" + stamp, ""
+        else:   # a site: the recording the frame belongs to and its own frame number; the time last
             name, frame = site.local(item.index)
             first, end = site.span_of(name)
-            text = (f"<b>{name}</b> &nbsp; <b>frame {frame}</b> / {end - first - 1} &nbsp; · &nbsp; "
-                    f"t = {item.stamp:.2f} s")
+            text = f"<b>{name}</b> &nbsp; <b>frame {frame}</b> / {end - first - 1}"
         k = self.doc.node_at_or_before(item.index)
         if k is not None:
             node = self.doc.node_id(k)
@@ -273,6 +273,7 @@ class FrameViewer(QWidget):
             text += f" &nbsp; · &nbsp; node <b>{node}</b>" + ("" if exact else f" (since frame {data['frame']})")
             if data.get("label"):
                 text += f" &nbsp; · &nbsp; “{data['label']}”"
+        text += stamp
         self.info.setText(text)
         self.info.setToolTip(text)  # the whole header, where the panel is too narrow for it
 

@@ -19,7 +19,7 @@ from typing import Optional
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QCheckBox, QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QCheckBox, QGridLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from .document import Document, LoopKey
 from .background import Worker
@@ -93,15 +93,16 @@ class GraphView(QWidget):
         self.plot.setToolTip("Click a node to see its frame, click a loop to select it, "
                              "Ctrl+click a node to add a manual loop to the current node")
 
-        # The toggles never set the view's minimum width (they clip on a very narrow view).
+        # The toggles never set the view's minimum width: on a narrow view (a 1280-px screen)
+        # they go on as many rows as their texts need (``_arrange_toggles``), never clipped.
         self.toggle_strip = QWidget()
-        self.toggle_strip.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Fixed)
-        strip = QHBoxLayout(self.toggle_strip)
-        strip.setContentsMargins(4, 2, 4, 0)
-        strip.setSpacing(8)
-        for box in self.toggles.values():
-            strip.addWidget(box)
-        strip.addStretch(1)
+        self.toggle_strip.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
+        self._toggle_grid = QGridLayout(self.toggle_strip)
+        self._toggle_grid.setContentsMargins(4, 2, 4, 0)
+        self._toggle_grid.setHorizontalSpacing(8)
+        self._toggle_grid.setVerticalSpacing(0)
+        self._toggle_columns = 0
+        self._arrange_toggles()
         # A site: which colour is which recording (wraps on a narrow view; hidden for one recording).
         self.legend = QLabel()
         self.legend.setTextFormat(Qt.RichText)
@@ -179,6 +180,28 @@ class GraphView(QWidget):
             self.plot.getPlotItem().enableAutoRange()
             self.plot.autoRange(padding=0.06)
 
+    def _arrange_toggles(self) -> None:
+        """The status toggles in as many columns as fit the view's width (all five on one row
+        when they fit); called again when the view is resized or their counts change."""
+        boxes = list(self.toggles.values())
+        widest = max(b.sizeHint().width() for b in boxes) + self._toggle_grid.horizontalSpacing()
+        room = max(self.width() - 8, widest)
+        total = sum(b.sizeHint().width() + self._toggle_grid.horizontalSpacing() for b in boxes)
+        columns = len(boxes) if total <= room else max(1, room // widest)
+        if columns == self._toggle_columns:
+            return
+        self._toggle_columns = columns
+        for b in boxes:
+            self._toggle_grid.removeWidget(b)
+        for i, b in enumerate(boxes):
+            self._toggle_grid.addWidget(b, i // columns, i % columns)
+        for c in range(len(boxes) + 1):
+            self._toggle_grid.setColumnStretch(c, 1 if c == columns else 0)
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        self._arrange_toggles()
+
     def _recording_of_nodes(self, n: int) -> Optional[np.ndarray]:
         """A site: each node's recording (index in the site), else None; the legend follows."""
         site = self.doc.site if self.doc.has_map else None
@@ -189,9 +212,11 @@ class GraphView(QWidget):
         index = {name: i for i, name in enumerate(site.names)}
         recording = np.array([index.get(str(s), 0) for s in sessions], np.int64)
         counts = np.bincount(recording, minlength=len(site.names))
-        self.legend.setText("Recordings: " + " &nbsp; ".join(
-            f"<span style='color:{recording_color(i)}; font-size:14pt'>■</span>&nbsp;<b>{name}</b>"
-            f"&nbsp;<span style='color:#666'>({counts[i]} nodes)</span>" for i, name in enumerate(site.names)))
+        # A bar in the path's colour (not a square: the status toggles above are squares of theirs).
+        self.legend.setText(" &nbsp; ".join(
+            f"<span style='color:{recording_color(i)}'><b>▬</b></span>&nbsp;{name}" for i, name in enumerate(site.names)))
+        self.legend.setToolTip("The recordings of the site, each one's path and nodes in its colour:\n" + "\n".join(
+            f"{name}: {counts[i]} nodes" for i, name in enumerate(site.names)))
         self.legend.setVisible(True)
         return recording
 
@@ -237,6 +262,7 @@ class GraphView(QWidget):
         counts = self.loop_counts()
         for status, box in self.toggles.items():
             box.setText(f"{STATUS_LABELS[status]} ({counts[status]})")
+        self._arrange_toggles()   # the texts' widths changed: fit them again
         shown = [r for r in rows if self.status_shown(r.status)]
         self._loop_segments = [(r.key, r.index_u, r.index_v) for r in shown]
         pairs = np.array([(a, b) for _, a, b in self._loop_segments], dtype=np.int64).reshape(-1, 2)

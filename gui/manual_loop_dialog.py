@@ -103,7 +103,8 @@ class ManualLoopDialog(QDialog):
     def _describe(self, k: int) -> str:
         d = self.doc.node_data(self.doc.node_id(k))
         label = f" “{d['label']}”" if d.get("label") else ""
-        return f"frame {d['frame']}, t = {float(d['stamp']):.1f} s{label}"
+        recording = f"{d['session']}, " if d.get("session") else ""   # a site: which recording
+        return f"{recording}frame {d['frame']}, t = {float(d['stamp']):.1f} s{label}"
 
     def _update(self) -> None:
         if self.doc.node_count() == 0:
@@ -119,7 +120,8 @@ class ManualLoopDialog(QDialog):
         elif g.has_edge(self.doc.node_id(a), self.doc.node_id(b)):
             problem = "These nodes are already joined."
             why = "The path or a loop joins them already: choose another second node."
-        elif abs(a - b) < temporal_gap(self.doc):
+        elif abs(a - b) < temporal_gap(self.doc) and (self.doc.node_data(self.doc.node_id(a)).get("session")
+                                                       == self.doc.node_data(self.doc.node_id(b)).get("session")):
             caution = f"Temporal neighbours ({abs(a - b)} steps apart): not a revisit."
             why = (f"n{a} and n{b} are {abs(a - b)} steps apart on the path: a loop between them joins a "
                    "place to itself, not a revisit. Add it only if you are sure.")
