@@ -27,7 +27,8 @@ from .poses import Poses
 
 # A row further than this (s) from the nearest GPS sample has no GPS position (a GoPro loses
 # its fix for seconds under trees or in a tunnel; interpolating across the gap would invent
-# a straight path). GPMF samples at 10-18 Hz, EXIF once per photo (one every 1-2 s).
+# a straight path). GPMF samples at 10-18 Hz, EXIF once per photo (one every 1-2 s). Nor has a
+# row before the first fix or after the last (more than a millisecond): no extrapolation.
 GPS_MAX_GAP_S = 2.0
 
 
@@ -72,8 +73,8 @@ class Metric:
 
 
 def gps_at(poses: Poses, stamps: np.ndarray, max_gap: float = GPS_MAX_GAP_S) -> np.ndarray:
-    """(n, 2) GPS positions at ``stamps``, linearly interpolated; NaN for a stamp further than
-    ``max_gap`` s from the nearest fix (outside the track, or in a gap of it)."""
+    """(n, 2) GPS positions at ``stamps``, linearly interpolated; NaN for a stamp outside the
+    track's time span or further than ``max_gap`` s from the nearest fix (in a gap of it)."""
     stamps = np.asarray(stamps, np.float64)
     t = np.asarray(poses.t, np.float64)
     out = np.full((stamps.size, 2), np.nan)
@@ -82,6 +83,7 @@ def gps_at(poses: Poses, stamps: np.ndarray, max_gap: float = GPS_MAX_GAP_S) -> 
     i = np.searchsorted(t, stamps)
     left, right = t[np.clip(i - 1, 0, t.size - 1)], t[np.clip(i, 0, t.size - 1)]
     near = np.minimum(np.abs(stamps - left), np.abs(right - stamps)) <= max_gap
+    near &= (stamps >= t[0] - 1e-3) & (stamps <= t[-1] + 1e-3)
     x, y = poses.at(stamps[near])
     out[near, 0], out[near, 1] = x, y
     return out
