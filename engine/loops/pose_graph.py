@@ -171,8 +171,10 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
         keys = np.union1d(keys, _gps_nodes(metric, dx, dy, chain_starts, params, m, budget)).astype(np.int64)
     dr = _dead_reckoning(dx, dy, dt, m, chain_starts)
     has_gps = np.zeros(chain_starts.size, bool)
+    start = dr
     if metric is not None:
         dr, has_gps = _anchored(dr, metric, chain_starts, m)
+        start = _initial(dr, metric, chain_starts, params, m)
 
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
     inliers: list[int] = []
@@ -184,13 +186,13 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
             inliers.append(graph.size() - 1)
         return graph.size() - 1
 
-    for c, start in enumerate(chain_starts):   # each chain a prior; the first fixes the map (unless GPS does)
+    for c, first in enumerate(chain_starts):   # each chain a prior; the first fixes the map (unless GPS does)
         sigma = 1e-3 if c == 0 and not has_gps[c] else _FREE_STEP
-        p = dr[start]
-        add(gtsam.PriorFactorPose2(int(start), gtsam.Pose2(float(p[0]), float(p[1]), float(p[2])),
+        p = start[first]
+        add(gtsam.PriorFactorPose2(int(first), gtsam.Pose2(float(p[0]), float(p[1]), float(p[2])),
                                    gtsam.noiseModel.Isotropic.Sigma(3, sigma)), True)
     for k in keys:
-        p = dr[k]
+        p = start[k]
         initial.insert(int(k), gtsam.Pose2(float(p[0]), float(p[1]), float(p[2])))
     segments = []   # (i, j) consecutive keys on one chain, joined by composed steps
     for i, j in zip(keys[:-1], keys[1:]):
@@ -291,13 +293,7 @@ def _gps_scale(dx, dy, dt, gps: np.ndarray, chain_starts: np.ndarray, params: Ma
         g = s + np.flatnonzero(have[s:e])
         if g.size < 2:
             continue
-        size = 2
-        while size < e - s - 1:
-            later = np.searchsorted(g, g + size)
-            ok = later < g.size
-            if ok.any() and np.median(np.linalg.norm(gps[g[later[ok]]] - gps[g[ok]], axis=1)) >= params.gps_scale_span_m:
-                break
-            size *= 2
+        size = _piece_size(g, gps, e - s, params.gps_scale_span_m)
         piece = (np.arange(s, e) - s) // size
         found = np.full(int(piece[-1]) + 1, np.nan)
         for k in range(found.size):
@@ -311,6 +307,28 @@ def _gps_scale(dx, dy, dt, gps: np.ndarray, chain_starts: np.ndarray, params: Ma
         found = np.where(np.isfinite(found) & (found <= 3 * mid) & (found >= mid / 3), found, mid)
         scale[s:e - 1] = found[piece[:-1]]
     return scale
+
+
+def _piece_size(g: np.ndarray, gps: np.ndarray, n: int, span_m: float) -> int:
+    """Node steps (a power of two) over which the fixes at nodes ``g`` of an ``n``-node chain
+    are ``span_m`` apart in the median."""
+    size = 2
+    while size < n - 1:
+        later = np.searchsorted(g, g + size)
+        ok = later < g.size
+        if ok.any() and np.median(np.linalg.norm(gps[g[later[ok]]] - gps[g[ok]], axis=1)) >= span_m:
+            break
+        size *= 2
+    return size
+
+
+def _rigid(p: np.ndarray, q: np.ndarray):
+    """(turn, rotation, shift) of the rigid motion that maps points ``p`` onto ``q`` best."""
+    pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
+    turn = float(np.arctan2(np.sum(pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0]),
+                            np.sum(pc[:, 0] * qc[:, 0] + pc[:, 1] * qc[:, 1]))) if p.shape[0] > 1 else 0.0
+    rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    return turn, rot, q.mean(axis=0) - rot @ p.mean(axis=0)
 
 
 def _similarity_scale(p: np.ndarray, q: np.ndarray) -> Optional[float]:
@@ -362,17 +380,38 @@ def _anchored(dr: np.ndarray, metric: "Metric", chain_starts: np.ndarray, m: int
         g = s + np.flatnonzero(have[s:e])
         if g.size:
             has_gps[c] = True
-            p, q = dr[g, :2], np.asarray(metric.gps[g], np.float64)
-            pc, qc = p - p.mean(axis=0), q - q.mean(axis=0)
-            turn = float(np.arctan2(np.sum(pc[:, 0] * qc[:, 1] - pc[:, 1] * qc[:, 0]),
-                                    np.sum(pc[:, 0] * qc[:, 0] + pc[:, 1] * qc[:, 1]))) if g.size > 1 else 0.0
-            rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
-            shift = q.mean(axis=0) - rot @ p.mean(axis=0)
+            turn, rot, shift = _rigid(dr[g, :2], np.asarray(metric.gps[g], np.float64))
             dr[s:e, :2] = dr[s:e, :2] @ rot.T + shift
             dr[s:e, 2] += turn
         elif metric.odometry is not None and np.isfinite(metric.odometry[s]).all():
             dr[s:e] = _apply(np.asarray(metric.odometry[s], np.float64), dr[s:e])
     return dr, has_gps
+
+
+def _initial(dr: np.ndarray, metric: "Metric", chain_starts: np.ndarray, params: MapParams, m: int) -> np.ndarray:
+    """Where the solver starts: ``dr`` (``_anchored``), each stretch of a chain with GPS
+    (``_piece_size``) moved onto its own fixes. Over a long recording the dead reckoning drifts
+    far from the fixes (its heading wanders), and a start that far off costs many iterations
+    or ends in a wrong minimum; a jump between stretches costs nothing (the steps close it)."""
+    if metric.gps is None:
+        return dr
+    out = dr.copy()
+    have = np.isfinite(metric.gps).all(axis=1)
+    bounds = list(chain_starts) + [m]
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        g = s + np.flatnonzero(have[s:e])
+        if g.size < 2:
+            continue
+        size = _piece_size(g, metric.gps, e - s, params.gps_scale_span_m)
+        for a in range(s, e, size):
+            b = min(a + size, e)
+            inside = g[(g >= a) & (g < b)]
+            if inside.size < 2 or np.ptp(metric.gps[inside], axis=0).max() < 1.0:
+                continue
+            turn, rot, shift = _rigid(dr[inside, :2], np.asarray(metric.gps[inside], np.float64))
+            out[a:b, :2] = dr[a:b, :2] @ rot.T + shift
+            out[a:b, 2] = dr[a:b, 2] + turn
+    return out
 
 
 def _spread(dr: np.ndarray, keys: np.ndarray, solved: np.ndarray, segments, m: int) -> np.ndarray:
