@@ -29,6 +29,8 @@ from .style import (CURRENT_COLOR, NODE_COLOR, SELECTED_COLOR, SEQUENTIAL_COLOR,
                     STATUS_LABELS, STATUS_ORDER, recording_color, status_pen)
 
 CLICK_RADIUS_PX = 9
+# What a status toggle says on a view too narrow for the full names (the tooltip has them).
+STATUS_SHORT = {"candidate": "cand", "auto": "auto", "confirmed": "conf", "manual": "man", "rejected": "rej"}
 
 
 # Above this many nodes no marker is drawn per node: at full view they only overlap, and
@@ -94,14 +96,16 @@ class GraphView(QWidget):
                              "Ctrl+click a node to add a manual loop to the current node")
 
         # The toggles never set the view's minimum width: on a narrow view (a 1280-px screen)
-        # they go on as many rows as their texts need (``_arrange_toggles``), never clipped.
+        # they say less ("cand 49") and, only if that is still too wide, take a second row
+        # (``_arrange_toggles``); never clipped, and the plot keeps its height where it can.
         self.toggle_strip = QWidget()
         self.toggle_strip.setSizePolicy(QSizePolicy.Ignored, QSizePolicy.Preferred)
         self._toggle_grid = QGridLayout(self.toggle_strip)
         self._toggle_grid.setContentsMargins(4, 2, 4, 0)
-        self._toggle_grid.setHorizontalSpacing(8)
+        self._toggle_grid.setHorizontalSpacing(6)
         self._toggle_grid.setVerticalSpacing(0)
         self._toggle_columns = 0
+        self._toggle_counts = {s: 0 for s in STATUS_ORDER}
         self._arrange_toggles()
         # A site: which colour is which recording (wraps on a narrow view; hidden for one recording).
         self.legend = QLabel()
@@ -181,12 +185,20 @@ class GraphView(QWidget):
             self.plot.autoRange(padding=0.06)
 
     def _arrange_toggles(self) -> None:
-        """The status toggles in as many columns as fit the view's width (all five on one row
-        when they fit); called again when the view is resized or their counts change."""
+        """The status toggles on one row, in full ("candidate (49)") where that fits the view's
+        width, else short ("cand 49"), else short in as many columns as fit; called again when
+        the view is resized or the counts change."""
         boxes = list(self.toggles.values())
-        widest = max(b.sizeHint().width() for b in boxes) + self._toggle_grid.horizontalSpacing()
-        room = max(self.width() - 8, widest)
-        total = sum(b.sizeHint().width() + self._toggle_grid.horizontalSpacing() for b in boxes)
+        spacing = self._toggle_grid.horizontalSpacing()
+        room = self.width() - 8
+        for short in (False, True):
+            for status, box in self.toggles.items():
+                n = self._toggle_counts.get(status, 0)
+                box.setText(f"{STATUS_SHORT[status]} {n}" if short else f"{STATUS_LABELS[status]} ({n})")
+            total = sum(b.sizeHint().width() for b in boxes) + spacing * (len(boxes) - 1)
+            if total <= room:
+                break
+        widest = max(b.sizeHint().width() for b in boxes) + spacing
         columns = len(boxes) if total <= room else max(1, room // widest)
         if columns == self._toggle_columns:
             return
@@ -261,7 +273,8 @@ class GraphView(QWidget):
         rows = self.doc.loop_rows() if self.doc.has_map and self.x.size else []
         counts = self.loop_counts()
         for status, box in self.toggles.items():
-            box.setText(f"{STATUS_LABELS[status]} ({counts[status]})")
+            box.setToolTip(f"Show the {STATUS_LABELS[status]} loops in the graph ({counts[status]})")
+        self._toggle_counts = dict(counts)
         self._arrange_toggles()   # the texts' widths changed: fit them again
         shown = [r for r in rows if self.status_shown(r.status)]
         self._loop_segments = [(r.key, r.index_u, r.index_v) for r in shown]

@@ -148,6 +148,13 @@ def test_decisions_across_recordings_survive_save_and_reopen(qtbot, make_window,
     assert statuses[tuple(map(tuple, confirmed))] == "confirmed"
     assert statuses[tuple(map(tuple, rejected))] == "rejected"
     assert not w2.isWindowModified()
+    # a parameter change re-maps the site (each recording its own nodes) and keeps the decisions
+    before = w2.doc.topomap
+    with qtbot.waitSignal(w2.mapReady, timeout=30_000):
+        w2.params_panel.neighbor_node_num.setValue(w2.params_panel.neighbor_node_num.value() + 1)
+    assert w2.doc.topomap is not before and set(w2.doc.topomap.node_sessions()) == set(w2.doc.site.names)
+    assert w2.doc.topomap.session_records() == before.session_records()
+    assert _statuses(w2)[tuple(map(tuple, confirmed))] == "confirmed"
 
 
 def test_decisions_across_recordings_survive_a_kill(qtbot, make_window, tmp_path, monkeypatch):
