@@ -113,15 +113,46 @@ def gpmf_dop_at(path: Path, stamps: np.ndarray) -> Optional[np.ndarray]:
     return dop[np.where(np.abs(s - t[lo]) <= np.abs(t[hi] - s), lo, hi)].astype(np.float64)
 
 
-def read_metric(path: Path, stamps: np.ndarray, *, gps: Optional[Poses] = None,
-                odom_topic: Optional[str] = None) -> Metric:
-    """The metric data of the recording at ``path`` at its descriptor ``stamps``: ``gps`` (the
-    recording's own positions, ``engine.sources.recording_poses``, when it has them) and, for
-    a bag, its odometry (``odom_topic``; None: its one Odometry / PoseStamped topic, "none":
-    no odometry). InputError when a named or found odometry topic does not cover the images."""
-    from .sources.odometry import NO_TOPIC, read_odometry
-    from .sources.rosbag import is_ros2_bag_dir
+class BagOdometry:
+    """A bag's odometry as ``bag_odometry`` found it: the topic's poses (None: none used) and
+    one line saying which was used, or why none was."""
 
+    def __init__(self, odometry=None, note: str = "", warning: str = "") -> None:
+        self.odometry, self.note, self.warning = odometry, note, warning
+
+
+def bag_odometry(path: Path, odom_topic: Optional[str] = None, *, image_topic: Optional[str] = None,
+                 interval: Optional[float] = None) -> BagOdometry:
+    """The odometry of the recording at ``path``, read before it is described: ``odom_topic``
+    (None: the bag's one Odometry / PoseStamped topic; "none": no odometry); nothing for a
+    recording that is not a bag (InputError when a topic was named for one). With
+    ``interval``, the frames that will be described (``image_topic``, sampled as describing
+    samples them) must be covered: a long recording is refused before it is described, not after."""
+    from .errors import InputError
+    from .sources.odometry import NO_TOPIC, read_odometry
+    from .sources.rosbag import BagSource, is_ros2_bag_dir
+
+    path = Path(path)
+    is_bag = is_ros2_bag_dir(path) if path.is_dir() else path.suffix.lower() in (".bag", ".db3", ".mcap")
+    if odom_topic is not None and odom_topic != NO_TOPIC and not is_bag:
+        raise InputError(f"{path}: an odometry topic ({odom_topic}) was given, but only ROS bags have topics")
+    if not is_bag or odom_topic == NO_TOPIC:
+        return BagOdometry()
+    odometry, note = read_odometry(path, odom_topic)
+    if odometry is None:
+        return BagOdometry(warning=note)
+    if interval is not None:
+        with BagSource(path, image_topic) as source:
+            odometry.at(np.asarray(source.stamps(), np.float64)[source.sample_indices(interval)], str(path))
+    return BagOdometry(odometry, note=note)
+
+
+def read_metric(path: Path, stamps: np.ndarray, *, gps: Optional[Poses] = None,
+                odometry: Optional[BagOdometry] = None) -> Metric:
+    """The metric data of the recording at ``path`` at its descriptor ``stamps``: ``gps`` (the
+    recording's own positions, ``engine.sources.recording_poses``, when it has them) and a
+    bag's ``odometry`` (``bag_odometry``). InputError when the odometry does not cover the
+    stamps."""
     path = Path(path)
     stamps = np.asarray(stamps, np.float64)
     metric = Metric()
@@ -133,17 +164,10 @@ def read_metric(path: Path, stamps: np.ndarray, *, gps: Optional[Poses] = None,
             known = "its DOP" if metric.gps_dop is not None else "a default sigma"
             metric.notes.append(f"GPS positions on {int(np.isfinite(xy).all(axis=1).sum())} of {stamps.size} "
                                 f"frames, each with {known}, in the pose graph")
-    is_bag = is_ros2_bag_dir(path) if path.is_dir() else path.suffix.lower() in (".bag", ".db3", ".mcap")
-    if odom_topic is not None and odom_topic != NO_TOPIC and not is_bag:
-        from .errors import InputError
-
-        raise InputError(f"{path}: an odometry topic ({odom_topic}) was given, but only ROS bags have topics")
-    if is_bag and odom_topic != NO_TOPIC:
-        odometry, note = read_odometry(path, odom_topic)
-        if odometry is not None:
-            metric.odometry = odometry.at(stamps, str(path))
-            metric.odometry_topic = odometry.topic
-            metric.notes.append(note)
-        elif note:
-            metric.warnings.append(note)
+    if odometry is not None and odometry.odometry is not None:
+        metric.odometry = odometry.odometry.at(stamps, str(path))
+        metric.odometry_topic = odometry.odometry.topic
+        metric.notes.append(odometry.note)
+    elif odometry is not None and odometry.warning:
+        metric.warnings.append(odometry.warning)
     return metric

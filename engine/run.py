@@ -65,10 +65,16 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
                          evaluate=evaluate, eval_nn=eval_nn, progress=progress, cancel=cancel, cache=cache)
     warnings: list[str] = []
     positions = "ground truth"   # graph attribute: what positioned the nodes
+    odometry = None
     if isinstance(source, Descriptors):                                            # 1
         descs, name = source, str(source.meta.get("source", ""))
     else:
         settings = method_settings(params, settings)
+        if metric:   # read (and checked against the frames) before the long part, describing
+            from .metric import bag_odometry
+
+            odometry = bag_odometry(Path(source), odom_topic, image_topic=settings.topic,
+                                    interval=settings.interval)
         descs = describe(source, settings, progress=progress, cancel=cancel, cache=cache)
         name = "" if is_descriptor_file(source) else str(source)
     if auto_thresholds:                                                            # 2
@@ -89,7 +95,7 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
     if metric and not isinstance(source, Descriptors):                             # (metric)
         from .metric import read_metric
 
-        used = read_metric(Path(source), descs.stamps, gps=recorded, odom_topic=odom_topic)
+        used = read_metric(Path(source), descs.stamps, gps=recorded, odometry=odometry)
         notes.extend(used.notes)
         warnings.extend(used.warnings)
         used = None if used.empty else used
