@@ -31,8 +31,9 @@ def _quiet_offscreen_warnings() -> None:
         qInstallMessageHandler(handler)
 
 
-def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
-    """Open the window (and INPUT); with ``screenshot``, save a picture and return."""
+def run(input_path, screenshot: Optional[str]) -> int:
+    """Open the window (and INPUT: a path, or a list of paths opened together as one site);
+    with ``screenshot``, save a picture and return."""
     _ensure_platform(screenshot is not None)
     from PySide6.QtCore import QEventLoop, QTimer
     from PySide6.QtWidgets import QApplication
@@ -61,13 +62,13 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
 
     if screenshot is None:
         if input_path:
-            QTimer.singleShot(0, lambda: window.open_path(input_path))
+            QTimer.singleShot(0, lambda: _open(window, input_path))
         return app.exec()
 
     status = 0
     try:
         if input_path:
-            if not window.open_path(input_path):
+            if not _open(window, input_path):
                 if not window._last_error:  # otherwise the window has printed the reason already
                     print(f"panotopo: cannot open {input_path}", file=sys.stderr)
                 return 2
@@ -95,12 +96,20 @@ def run(input_path: Optional[str], screenshot: Optional[str]) -> int:
     return status
 
 
+def _open(window, input_path) -> bool:
+    if isinstance(input_path, (list, tuple)):
+        return window.open_paths(list(input_path))
+    return window.open_path(input_path)
+
+
 def main(argv: Optional[list[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="panotopo-gui", description="panotopo desktop app")
-    parser.add_argument("input", nargs="?", help="recording, bag, folder, session (.json) or descriptors (.npz)")
+    parser.add_argument("input", nargs="*", help="recording, bag, folder, session (.json), descriptors (.npz) "
+                        "or site map (.graphml); several: one site of them")
     parser.add_argument("--screenshot", metavar="PNG", help="run, save a picture of the window and exit")
     args = parser.parse_args(argv)
-    return run(args.input, args.screenshot)
+    inputs = list(args.input or [])
+    return run(inputs if len(inputs) > 1 else (inputs[0] if inputs else None), args.screenshot)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,8 @@ from engine import cli as engine_cli
 
 def add_gui_command(sub: argparse._SubParsersAction, common: argparse.ArgumentParser) -> None:
     p = sub.add_parser("gui", parents=[common], help="open the desktop app")
-    p.add_argument("input", nargs="?", help="a recording, a descriptors .npz or a session file")
+    p.add_argument("input", nargs="*", help="a recording, a descriptors .npz, a session file or a site map "
+                   "(.graphml); several recordings: one site of them")
     p.add_argument("--screenshot", help="load INPUT, run the engine, save a picture of the window and exit")
     p.set_defaults(func=_run_gui)
 
@@ -23,7 +24,8 @@ def add_gui_command(sub: argparse._SubParsersAction, common: argparse.ArgumentPa
 def _run_gui(args: argparse.Namespace) -> int:
     from .app import run
 
-    return run(args.input, args.screenshot)
+    inputs = list(args.input or [])
+    return run(inputs if len(inputs) > 1 else (inputs[0] if inputs else None), args.screenshot)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -175,7 +175,7 @@ class RunControl(QObject):
         self.w.statusBar().showMessage(
             f"Map built in {result.seconds:.1f} s: {self.w.doc.node_count()} nodes, "
             f"{len(self.w.doc.loop_rows())} loop candidates" + "".join(f" · {n}" for n in result.notes), 10000)
-        if site is not None and site.new:
+        if site is not None and site.new and self.w.interactive:   # a scripted run writes nothing of the user's
             self._write_site_file()
         self.w._update_actions()
         if self.w.sessions.is_modified():

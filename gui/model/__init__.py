@@ -18,6 +18,8 @@ tests/test_layers.py), so the model is tested in plain Python (tests/test_app_mo
 * ``layout``: the drawing of the map as decided (no ground truth), from a copy of it.
 * ``similarity``: the node similarity matrix with a picture-sized preview.
 * ``loop_key``: loops addressed by the source frames of their two nodes.
+* ``site``: several recordings open as one site: what to map, the site file, each
+  recording's stretch of one site timeline and its frames read from its own recording.
 """
 
 from .commands import AddManualLoop, RemoveLoop, SetLabel, SetStatuses

@@ -194,7 +194,7 @@ def open_site(plan: SitePlan, open_recording: Callable[[str], object]) -> tuple[
             try:
                 source = open_recording(path)
                 source.stamps()   # the one indexing pass, here in the background
-            except (InputError, OSError):
+            except Exception:     # noqa: BLE001 - frames are a view of the map: none shown, said in one line
                 source = None
         npz = s.descriptors or (s.source if s.source.lower().endswith(".npz") else "")
         span = max(int(source.frame_count) if source is not None else 0, _npz_frame_span(npz) if npz else 0)
