@@ -218,8 +218,8 @@ PARAMETERS: tuple[Parameter, ...] = (
               "together repeat one error, and counted many times it could outvote a true loop "
               "whose two visits' fixes are a few metres off; 20 m is 15-25 s at walking pace", 0.1, 1e5),
     Parameter("gps_scale_span_m", float, 25.0, _NEW,
-              "without odometry, the image steps' length in metres is the GPS distance over the "
-              "image path's own, measured between GPS fixes at least this far apart",
+              "without odometry, the image steps' length in metres comes from fitting the image path "
+              "to the GPS fixes over stretches this long (in the median)",
               "the distance between two fixes of 3 m sigma each is uncertain by sqrt(2) x 3 / 25 = "
               "17 %, inside the image steps' own 30 % (step_sigma_steps)", 1.0, 1e5),
 )
