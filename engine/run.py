@@ -66,6 +66,12 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
     warnings: list[str] = []
     positions = "ground truth"   # graph attribute: what positioned the nodes
     odometry = None
+    named = odom_topic not in (None, "none")
+    if named and (not metric or params.method != "verified" or isinstance(source, Descriptors)):
+        from .errors import InputError
+
+        raise InputError(f"an odometry topic ({odom_topic}) is read from a bag for the verified method's pose graph")
+    metric = metric and params.method == "verified"   # only its pose graph reads metric data
     if isinstance(source, Descriptors):                                            # 1
         descs, name = source, str(source.meta.get("source", ""))
     else:
@@ -101,10 +107,6 @@ def run(source: Union[str, Path, Descriptors], params: MapParams = MapParams(), 
         used = None if used.empty else used
         if used is not None:
             descs.cache["metric"] = used
-    elif odom_topic is not None:
-        from .errors import InputError
-
-        raise InputError(f"an odometry topic ({odom_topic}) needs a bag read for the pose graph's metric data")
     if progress is not None:
         progress(0, 0, "building the map")
     topomap = build_map(descs, params, source=name, metric=used)                  # 3

@@ -196,3 +196,14 @@ def test_a_fast_topic_is_read_at_twenty_hertz(route, tmp_path):
     assert odo is not None and "/odom" in line
     assert np.median(np.diff(odo.t)) == pytest.approx(0.05, abs=0.011)
     assert odo.t.size < 0.25 * track[0].size
+
+
+def test_an_odometry_topic_is_for_the_verified_method(route, tmp_path, capsys):
+    frames, stamps, poses = route
+    track = _odometry_track(poses, stamps[0], stamps[7])
+    bag = write_bag(tmp_path / "r.bag", frames[:8], stamps[:8], {"/odom": ("nav_msgs/msg/Odometry", track)})
+    code = main(["map", str(bag), "-o", str(tmp_path / "m.graphml"), *FAST, "--method", "ours", "--odom-topic", "/odom"])
+    err = capsys.readouterr().err
+    assert code != 0 and err.count("\n") == 1 and "verified" in err
+    assert main(["map", str(bag), "-o", str(tmp_path / "m.graphml"), *FAST, "--method", "ours"]) == 0
+    assert "odometry from" not in capsys.readouterr().out   # the paper's methods have no pose graph to put it in
