@@ -107,17 +107,21 @@ class Opening(QObject):
                     return False
                 topic, pose_topic = chosen
             source = self._open_recording_in_background(p, topic)
-            if session is not None and session.describe:
-                settings = _describe_settings(session.describe, self.w.describe_options)
-            else:
-                params = session.map_params() if session else self.w.params_panel.params()
-                descriptor = self.w.params_panel.descriptor_name()
-                settings = DescribeSettings(descriptor=descriptor,
-                                            interval=self.w.params_panel.interval_value(), topic=topic,
-                                            shift=params.uses_shift,
-                                            options=self.w.runs._panel_options(self.w.describe_options, descriptor))
+            settings = self._recording_settings(session, topic)
 
         return self._start_document(p, source, settings, session, session_file, pose_topic, run)
+
+    def _recording_settings(self, session: Optional[Session], topic: Optional[str]):
+        """How recordings are described: as the session says, else as the panel says."""
+        from engine.pipeline import DescribeSettings
+
+        if session is not None and session.describe:
+            return _describe_settings(session.describe, self.w.describe_options)
+        params = session.map_params() if session else self.w.params_panel.params()
+        descriptor = self.w.params_panel.descriptor_name()
+        return DescribeSettings(descriptor=descriptor, interval=self.w.params_panel.interval_value(), topic=topic,
+                                shift=params.uses_shift,
+                                options=self.w.runs._panel_options(self.w.describe_options, descriptor))
 
     def _open_site(self, paths: list, run: bool, session: Optional[Session] = None,
                    session_file: Optional[Path] = None) -> bool:
@@ -130,16 +134,7 @@ class Opening(QObject):
         plan = plan_site(paths)   # a recording or descriptors file gone: one line, nothing touched
         site, frames, missing = call_in_background(
             self.w, f"Reading {len(plan.sessions)} recordings…", lambda: open_site(plan, lambda q: open_recording(Path(q))))
-        if session is not None and session.describe:
-            settings = _describe_settings(session.describe, self.w.describe_options)
-        else:
-            from engine.pipeline import DescribeSettings
-
-            params = session.map_params() if session else self.w.params_panel.params()
-            descriptor = self.w.params_panel.descriptor_name()
-            settings = DescribeSettings(descriptor=descriptor, interval=self.w.params_panel.interval_value(),
-                                        shift=params.uses_shift,
-                                        options=self.w.runs._panel_options(self.w.describe_options, descriptor))
+        settings = self._recording_settings(session, None)
         if not self._start_document(site.anchor, frames, settings, session, session_file, None, run, site=site):
             frames.close()
             return False
