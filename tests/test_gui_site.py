@@ -157,34 +157,18 @@ def test_decisions_across_recordings_survive_save_and_reopen(qtbot, make_window,
     assert _statuses(w2)[tuple(map(tuple, confirmed))] == "confirmed"
 
 
-def test_decisions_across_recordings_survive_a_kill(qtbot, make_window, tmp_path, monkeypatch):
+def test_decisions_across_recordings_survive_a_kill_and_a_moved_recording(qtbot, make_window, tmp_path, boxes,
+                                                                         monkeypatch):
     files = make_site_files(tmp_path / "site")
     w = make_window()
     open_site(qtbot, w, [files[n] for n in NAMES])
     confirmed, rejected = _confirm_across(qtbot, w)
     records = w.doc.journal.replay()
     assert len(records) == 2 and all(sorted(r["sessions"]) == list(AB) for r in records)
+    anchor = w.doc.site.anchor
     w.shutdown()                             # no save, no autosave: as if killed
 
-    w2 = make_window()
-    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.Yes)   # "Restore unsaved work?"
-    open_site(qtbot, w2, [files[n] for n in NAMES])   # the same recordings chosen again: the same site
-    assert w2.doc.site.anchor == w.doc.site.anchor
-    statuses = _statuses(w2)
-    assert statuses[tuple(map(tuple, confirmed))] == "confirmed"
-    assert statuses[tuple(map(tuple, rejected))] == "rejected"
-    assert w2.isWindowModified()
-
-
-def test_a_site_whose_recording_moved_is_one_line_and_keeps_its_work(qtbot, make_window, tmp_path, boxes,
-                                                                      monkeypatch):
-    files = make_site_files(tmp_path / "site")
-    w = make_window()
-    open_site(qtbot, w, [files[n] for n in NAMES])
-    confirmed, _ = _confirm_across(qtbot, w)
-    anchor = w.doc.site.anchor
-    w.shutdown()                             # killed with two decisions in the journal
-
+    # B's descriptors moved away meanwhile: one line, no traceback, nothing opened, nothing lost
     moved = tmp_path / "B_elsewhere.npz"
     shutil.move(files["B"], moved)
     w2 = make_window()
@@ -195,11 +179,15 @@ def test_a_site_whose_recording_moved_is_one_line_and_keeps_its_work(qtbot, make
     assert not w2.open_paths([files["A"], files["B"]])   # a missing descriptors file, chosen with others
     assert boxes[-1][0] == "critical" and "\n" not in boxes[-1][1]
 
-    shutil.move(moved, files["B"])           # back where the site says: nothing was lost
+    shutil.move(moved, files["B"])           # back where the site says
     w3 = make_window()
-    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.Yes)
-    open_site(qtbot, w3, [anchor])
-    assert _statuses(w3)[tuple(map(tuple, confirmed))] == "confirmed"
+    monkeypatch.setattr(QMessageBox, "question", lambda *a, **k: QMessageBox.Yes)   # "Restore unsaved work?"
+    open_site(qtbot, w3, [files[n] for n in NAMES])   # the same recordings chosen again: the same site
+    assert w3.doc.site.anchor == anchor
+    statuses = _statuses(w3)
+    assert statuses[tuple(map(tuple, confirmed))] == "confirmed"
+    assert statuses[tuple(map(tuple, rejected))] == "rejected"
+    assert w3.isWindowModified()
 
 
 def test_a_recording_whose_frames_moved_still_maps_and_says_so_in_one_line(qtbot, make_window, tmp_path, boxes):
