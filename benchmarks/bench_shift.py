@@ -3,7 +3,7 @@
     python benchmarks/bench_shift.py --mode agreement [--seeds 0,1,2,3,4]
     python benchmarks/bench_shift.py --mode methods   [--seeds 0,1,2] [--layout sectors]
     python benchmarks/bench_shift.py --mode verified  [--seeds 8,9]   [--layout sectors]
-    python benchmarks/bench_shift.py --mode stability [--seeds 0,1,2,3,4] [--seeds2 0,1]
+    python benchmarks/bench_shift.py --mode stability [--seeds 0,1,2,3,4] [--seeds2 0,1] [--variants]
 
 ``agreement``: for same-place pairs (<= 1 m apart, >= 20 s apart) of every synthetic
 route, the share whose canonical headings (``engine.shift.canonical_shift``) agree with
@@ -16,8 +16,36 @@ crossing and reverse routes at the same calibrated threshold (the harness of
 synthetic routes (``engine.synth`` crossing/reverse, where the parameters were looked at;
 ``engine.synth2`` crossing/reverse untouched) and on the five real GoPro MAX photos (EXIF
 GPSImgDirection), whose true turns come from the feature two-view geometry.
-Recordings are 256x128 at 1 frame/s like bench_methods.py; descriptors are cached under
---cache with the layout in the file name (never mix caches of different versions).
+``--variants``: instead of tracking, the per-frame (absolute) alternatives tried in round 2 of
+issue 44 item 6, none of which passed (real misses within a few degrees AND no revisit figure
+worse on either family), so ``canonical_shift`` is unchanged. Figures (real: mean / max miss
+of the four consecutive pairs, image-only 38.8 / 94.2; synth a20 / a45 / similarity, image-only
+0.84 / 0.92 / 0.581; synth2 0.43 / 0.72 / 0.207):
+- log-opponent first harmonic (log luminance, log R/G, log RG/B^2, unnormalised: gain-free),
+  rows 0.15-0.5 ("log-opp sky"): real 4.4 / 6.3, but synth 0.83 / 0.93 / 0.558 and synth2
+  0.47 / 0.59 / 0.196; rows 0.25-0.5, blue-yellow doubled ("sky+"): real 1.0 / 3.5, synth
+  0.79 / 0.91 / 0.546, synth2 0.44 / 0.68 / 0.199. On the real photos only the sky and
+  skyline (colour, not brightness: the near cream building is as bright as the sky) stay put
+  over 1-3 m steps past a building and up to a staircase; the synthetic families prefer
+  brightness, and a sky-led heading would also move with the sun and clouds between visits,
+  which no synthetic family can show (their skies are fixed).
+- the same, rows 0.2-0.45 with chroma halved ("horizon", engine.synth's best of 480 band and
+  weight settings): synth 0.87 / 0.95 / 0.605 but real 19.0 / 30.8 and synth2 0.41 / 0.60.
+- "manhattan snap": the image-only heading moved to the nearest of the four dominant
+  horizontal line directions (vanishing directions on the levelled sphere, a far-field
+  quantity): consecutive synthetic steps median 0.2 deg, synth 0.91 / 0.91 / 0.639, synth2
+  0.67 / 0.67 / 0.293, but a pair on either side of a 45-degree boundary is 90 degrees off
+  (a45 lower), and on the real photos the line directions themselves move 2-10 degrees per
+  step (several line families: road, crossing, stairs) while the colour phase still picks the
+  quarter: 47.1 / 91.3.
+- "harmonics 2 + prev": the maxima of a two-harmonic profile, the previous frame (turned by
+  ``relative_yaw``) choosing only between maxima within 0.8 of each other: synth 0.70 / 0.81,
+  real 33.3 / 52.2 (more maxima, more flips; the real 2-3 jump is a drift of the one maximum,
+  not a choice between two).
+Robust combinations of per-band phases (circular M-estimate, kernel mode) were no better on the
+real photos (mean miss 28-42). Recordings are 256x128 at 1 frame/s like bench_methods.py;
+descriptors are cached under --cache with the layout in the file name (never mix caches of
+different versions).
 The table goes to stdout.
 """
 
@@ -130,6 +158,8 @@ def shift_headings(frames, yaw, how: str) -> np.ndarray:
         return np.array([canonical_shift(f) for f in frames]) * 360.0 / w
     if how == "heading":
         return np.array([shift_from_yaw(w, a) for a in yaw]) * 360.0 / w
+    if how in VARIANTS:
+        return variant_headings(frames, how)
     return tracked_headings(frames, {"track 0.7": 0.7, "track 1": 1.0}[how])
 
 
@@ -146,28 +176,131 @@ def shifted_similarity(frames, heads, i, j) -> np.ndarray:
 
 
 WAYS = ("image", "track 0.7", "track 1", "heading")
+# Per-frame (absolute) alternatives to the image-only shift tried in round 2 (--variants);
+# none is the default: see the module docstring for why.
+VARIANTS = ("log-opp sky", "log-opp sky+", "log-opp horizon", "manhattan snap", "harmonics 2 + prev")
 
 
-def stability_rows(family: str, recordings) -> list[str]:
-    errs = {w: [] for w in WAYS}
-    steps = {w: [] for w in WAYS}
-    sims = {w: [] for w in WAYS}
+def log_opponent_heading(rgb, band, weights) -> float:
+    """First-harmonic phase (degrees) of the log-opponent column signals (log luminance,
+    log R/G, log RG/B^2 halved) in the rows ``band``, each weighted by ``weights``: no per-signal
+    normalisation, so a channel counts by its own contrast; per-channel gain (exposure, white
+    balance) is a constant in the logs and drops out with the column mean."""
+    from engine.shift import downscale
+
+    x = downscale(rgb, 256).astype(np.float64)
+    h = x.shape[0]
+    x = x[int(round(band[0] * h)):int(round(band[1] * h))]
+    lg = np.log(x + 4.0)
+    sig = np.stack([np.log(x.sum(axis=2) + 12.0).mean(axis=0), (lg[..., 0] - lg[..., 1]).mean(axis=0),
+                    ((lg[..., 0] + lg[..., 1]) / 2 - lg[..., 2]).mean(axis=0)])
+    c1 = np.fft.rfft(sig - sig.mean(axis=1, keepdims=True), axis=1)[:, 1]
+    return float((-np.degrees(np.angle((c1 * np.asarray(weights)).sum()))) % 360.0)
+
+
+def manhattan_direction(rgb, width: int = 512, sigma: float = 1.5) -> float:
+    """Dominant horizontal line directions modulo 90 degrees (in column degrees): every edge
+    pixel's great circle (structure tensor, sigma in pixels) meets the horizon of the levelled
+    sphere (up = the direction least aligned with near-vertical edges' circle normals) at a
+    vanishing direction; the phase of their 4-fold circular mean, weighted by edge strength.
+    A far-field (translation-free) quantity where the world has straight parallel lines."""
+    import cv2
+
+    g = rgb.astype(np.float32).mean(axis=2)
+    if g.shape[1] > width:
+        g = cv2.resize(g, (width, width // 2), interpolation=cv2.INTER_AREA)
+    h, w = g.shape
+    phi = (np.pi / 2 - np.pi * (np.arange(h) + 0.5) / h)[:, None] * np.ones((1, w))
+    lam = np.ones((h, 1)) * (2 * np.pi * (np.arange(w) + 0.5) / w)[None, :]
+    cphi = np.cos(phi)
+    ge = 0.5 * (np.roll(g, -1, axis=1) - np.roll(g, 1, axis=1)) / np.maximum(cphi, 0.05)
+    gn = -np.gradient(g, axis=0)
+    jee, jnn, jen = (cv2.GaussianBlur(a.astype(np.float32), (0, 0), sigma) for a in (ge * ge, gn * gn, ge * gn))
+    trace = jee + jnn
+    strength = np.sqrt((jee - jnn) ** 2 + 4 * jen ** 2) / np.sqrt(np.maximum(trace, 1e-6)) * cphi
+    ang = 0.5 * np.arctan2(2 * jen, jee - jnn)          # dominant gradient; the edge is across it
+    east = np.stack([-np.sin(lam), np.cos(lam), np.zeros_like(lam)], -1)
+    north = np.stack([-np.sin(phi) * np.cos(lam), -np.sin(phi) * np.sin(lam), cphi], -1)
+    p = np.stack([cphi * np.cos(lam), cphi * np.sin(lam), np.sin(phi)], -1)
+    t = -np.sin(ang)[..., None] * east + np.cos(ang)[..., None] * north
+    n = np.cross(p, t).reshape(-1, 3)
+    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-9)[:, None]
+    wt = strength.ravel().astype(np.float64)
+    up = np.array([0.0, 0.0, 1.0])
+    for _ in range(3):
+        sel = np.abs(n @ up) < np.sin(np.radians(8.0))
+        up = np.linalg.eigh((n[sel] * wt[sel, None]).T @ n[sel])[1][:, 0]
+        up = up if up[2] > 0 else -up
+    e1 = np.array([1.0, 0.0, 0.0]) - up[0] * up
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    nu = n @ up
+    v = np.cross(n, up)
+    a = np.arctan2(v @ e2, v @ e1)
+    z = (wt * np.abs(nu) * np.sqrt(np.maximum(0.0, 1.0 - nu * nu)) * np.exp(4j * a)).sum()
+    return float((np.degrees(np.angle(z)) / 4.0) % 90.0)
+
+
+def harmonics_prev_headings(frames, k: int = 2, ratio: float = 0.8) -> np.ndarray:
+    """Multimodal absolute estimate: the maxima of the profile of the first ``k`` harmonics of
+    the heading signals; when the second is within ``ratio`` of the first, the one nearest
+    the previous heading turned by ``relative_yaw`` (score >= 0.3), else the strongest."""
+    from engine.shift import heading_signals, relative_yaw
+
+    th = np.radians(np.arange(0.0, 360.0, 0.5))
+    out, prev = [], None
+    for idx, f in enumerate(frames):
+        c = np.fft.rfft(heading_signals(f), axis=1)[:, 1:k + 1].sum(axis=0)
+        prof = sum((c[m - 1] * np.exp(-1j * m * th)).real for m in range(1, k + 1))
+        peaks = np.nonzero((prof > np.roll(prof, 1)) & (prof >= np.roll(prof, -1)))[0]
+        peaks = peaks[np.argsort(-prof[peaks])]
+        h = float(np.degrees(th[peaks[0]]))
+        close = [float(np.degrees(th[q])) for q in peaks if prof[q] >= ratio * prof[peaks[0]]]
+        if prev is not None and len(close) > 1:
+            yaw, score = relative_yaw(frames[idx - 1], f)
+            if score >= 0.3:
+                h = min(close, key=lambda d: abs(float(_wrap(d - prev - yaw))))
+        out.append(h)
+        prev = h
+    return np.array(out)
+
+
+def variant_headings(frames, how: str) -> np.ndarray:
+    if how == "log-opp sky":        # rows 0.15-0.5: sky and skyline, all three signals equal
+        return np.array([log_opponent_heading(f, (0.15, 0.5), (1, 1, 1)) for f in frames])
+    if how == "log-opp sky+":       # rows 0.25-0.5, blue-yellow doubled: the real photos' best
+        return np.array([log_opponent_heading(f, (0.25, 0.5), (1, 0.5, 2)) for f in frames])
+    if how == "log-opp horizon":    # rows 0.2-0.45, chroma halved: engine.synth's best
+        return np.array([log_opponent_heading(f, (0.2, 0.45), (1, 0.5, 0.5)) for f in frames])
+    if how == "manhattan snap":     # the image-only heading moved to the nearest line direction
+        base = np.array([canonical_shift(f) * 360.0 / f.shape[1] for f in frames])
+        vp = np.array([manhattan_direction(f) for f in frames])
+        return (base + (vp - base + 45.0) % 90.0 - 45.0) % 360.0
+    if how == "harmonics 2 + prev":
+        return harmonics_prev_headings(frames)
+    raise ValueError(how)
+
+
+def stability_rows(family: str, recordings, ways=WAYS) -> list[str]:
+    errs = {w: [] for w in ways}
+    steps = {w: [] for w in ways}
+    sims = {w: [] for w in ways}
     for frames, x, y, yaw in recordings:
         i, j = same_place_pairs(x, y)
-        for way in WAYS:
+        for way in ways:
             h = shift_headings(frames, yaw, way)
             errs[way].append(np.abs(_wrap((h[j] - h[i]) - np.degrees(yaw[j] - yaw[i]))))
             steps[way].append(np.abs(_wrap(np.diff(h) - np.degrees(np.diff(yaw)))))
             sims[way].append(shifted_similarity(frames, h, i, j))
     rows = []
-    for way in WAYS:
+    for way in ways:
         e, s, m = (np.concatenate(v[way]) for v in (errs, steps, sims))
         rows.append(f"| {family} | {way} | {e.size} | {np.mean(e <= 20):.2f} | {np.mean(e <= 45):.2f} | "
                     f"{np.mean(m):.3f} | {np.median(s):.1f} | {np.percentile(s, 95):.1f} | {np.mean(s > 10):.2f} |")
     return rows
 
 
-def real_rows() -> list[str]:
+def real_rows(variants=()) -> list[str]:
     """Consecutive real photos: how far each way's shift change misses the true turn."""
     import cv2
 
@@ -199,10 +332,18 @@ def real_rows() -> list[str]:
         rows.append(f"| {k + 1}-{k + 2} | {turn:.1f} ({tv.inliers} inliers) | {di:.1f} | {miss_i[-1]:.1f} | "
                     f"{de:.1f} | {miss_e[-1]:.1f} |")
     rows.append(f"| mean miss | | | {np.mean(miss_i):.1f} | | {np.mean(miss_e):.1f} |")
+    if variants:
+        turns = [float(two_view(feats[k], feats[k + 1]).yaw_deg) for k in range(len(imgs) - 1)]
+        rows += ["", "| shift | miss 1-2 | 2-3 | 3-4 | 4-5 | mean | max |", "|---|---|---|---|---|---|---|"]
+        for way in ("image",) + tuple(variants):
+            h = image if way == "image" else variant_headings(np.stack(imgs), way)
+            miss = np.abs(_wrap(np.diff(h) - np.array(turns)))
+            rows.append(f"| {way} | " + " | ".join(f"{m:.1f}" for m in miss)
+                        + f" | {miss.mean():.1f} | {miss.max():.1f} |")
     return rows
 
 
-def stability(seeds, seeds2, cache: Path) -> str:
+def stability(seeds, seeds2, cache: Path, variants: bool = False) -> str:
     from engine.synth2 import make_recording as make_recording2
 
     first = [_cached_frames(f"s1_{case.name}", lambda c=case: render(c), cache)
@@ -212,9 +353,11 @@ def stability(seeds, seeds2, cache: Path) -> str:
               for r in ("crossing", "reverse") for s in seeds2]
     head = ["| family | shift | same-place pairs | agree <= 20 deg | <= 45 deg | shifted similarity | "
             "step miss median | p95 | share > 10 deg |", "|---|---|---|---|---|---|---|---|---|"]
+    ways = ("image",) + VARIANTS if variants else WAYS
     return "\n".join([f"## Shift stability: synth seeds {seeds}, synth2 seeds {seeds2} (crossing, reverse)", ""]
-                     + head + stability_rows("synth", first) + stability_rows("synth2", second)
-                     + ["", "## Real GoPro MAX photos 1-5 (one heading, walking north)", ""] + real_rows())
+                     + head + stability_rows("synth", first, ways) + stability_rows("synth2", second, ways)
+                     + ["", "## Real GoPro MAX photos 1-5 (one heading, walking north)", ""]
+                     + real_rows(VARIANTS if variants else ()))
 
 
 def describe(case: Case, shifts, layout: str, input_height: int, cache: Path) -> Described:
@@ -253,6 +396,8 @@ def main() -> int:
     ap.add_argument("--mode", choices=("agreement", "methods", "verified", "stability"), default="methods")
     ap.add_argument("--seeds", default=None)
     ap.add_argument("--seeds2", default="0,1", help="engine.synth2 seeds (stability)")
+    ap.add_argument("--variants", action="store_true",
+                    help="stability: the per-frame alternatives tried in round 2 instead of tracking")
     ap.add_argument("--layout", default="sectors")
     ap.add_argument("--input-height", type=int, default=128)
     ap.add_argument("--cache", default="/tmp/pshift/bench")
@@ -263,7 +408,7 @@ def main() -> int:
         text = f"## Canonical heading agreement, same-place pairs, seeds {seeds}\n\n" + agreement(seeds)
     elif args.mode == "stability":
         seeds = [int(s) for s in (args.seeds or "0,1,2,3,4").split(",")]
-        text = stability(seeds, [int(s) for s in args.seeds2.split(",")], cache)
+        text = stability(seeds, [int(s) for s in args.seeds2.split(",")], cache, args.variants)
     elif args.mode == "methods":
         seeds = [int(s) for s in (args.seeds or "0,1,2").split(",")]
         routes = ("crossing", "reverse")
