@@ -54,7 +54,7 @@ def run_job(job: RunJob, work: Job) -> FinishedRun:
         return FinishedRun(job, site.descs, site.topomap, time.monotonic() - t0, list(site.row_starts),
                            [s.name for s in site.sessions], notes)
     out = run(job.path, job.params, settings=job.settings, progress=work.progress, cancel=work.cancel,
-              cache=job.cache)
+              cache=job.cache, metric=True)   # the recording's own odometry / GPS, as the CLI's map
     return FinishedRun(job, out.descs, out.topomap, time.monotonic() - t0)
 
 

@@ -114,7 +114,7 @@ def test_tab_leaves_the_table_and_reaches_the_frame_viewer(qtbot, window):
     qtbot.waitUntil(view.hasFocus)
     qtbot.keyClick(view, Qt.Key_Tab)
     assert QApplication.focusWidget() is not view
-    for _ in range(40):
+    for _ in range(100):   # every focusable widget of the window at most
         focused = QApplication.focusWidget()
         if focused is w.frame_viewer or w.frame_viewer.isAncestorOf(focused):
             break

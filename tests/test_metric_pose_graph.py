@@ -218,8 +218,8 @@ def test_stage_seven_sends_the_loop_gps_rejects_to_the_queue_and_measures_closur
 
     m, steps, xy, _ = _route(STREETS, step_m=2.0)
     pairs, status = _auto_pairs([10, 20], [190, 130], [0.0, np.nan])
-    out, reason, closure, poses = consistent(pairs, status, _Geometry(steps), MapParams(), m, (0,),
-                                             Metric(gps=_gps(xy)))
+    out, reason, closure, poses, _ = consistent(pairs, status, _Geometry(steps), MapParams(), m, (0,),
+                                                Metric(gps=_gps(xy)))
     assert out.tolist() == ["auto", "candidate"] and "rejects" in reason[1]
     assert closure[0] < 0.5 and closure[1] == pytest.approx(30.0, abs=2.0)   # 60 m at 2 m per node step
     assert np.max(np.linalg.norm(poses[:, :2] - xy, axis=1)) < 4.0          # the map in metres

@@ -68,7 +68,8 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     pairs = geometry.measure(pairs, params)                                         # 4
     status, rule = tiers(pairs, params, recording=recording)                        # 5
     pairs, status, rule = nearest(pairs, status, rule, set_aside, v, recording, geometry, params, cache)   # 6
-    status, reason, closure, poses = consistent(pairs, status, geometry, params, m, chain_starts, metric)  # 7
+    status, reason, closure, poses, rule = consistent(pairs, status, geometry, params, m, chain_starts, metric,
+                                                      rule)                                        # 7
     out = [LoopCandidate(a=int(pairs.a[i]), b=int(pairs.b[i]), similarity=float(pairs.cosine[i]), window_count=0,
                          yaw=float(pairs.yaw[i]) if np.isfinite(pairs.yaw[i]) else None,
                          score=float(pairs.score[i]), status=str(status[i]),
@@ -88,36 +89,60 @@ def _path_only(geometry: PairGeometry, params: MapParams, m: int, chain_starts, 
 
 
 def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params: MapParams, m: int,
-               chain_starts, metric=None) -> tuple:
-    """Stage 7: (status, reason, closure, poses). The automatic loops and the steps make one
-    robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a candidate
-    with the reason; a candidate whose ends the solved map puts further apart than
-    ``closure_slack`` + ``closure_rate`` per step of the graph between them is dropped (weak
-    evidence, and the map against it). ``closure``: the ends' distance in the solved map,
-    node steps (NaN without geometry; with ``metric`` the map is in metres, and the distance
-    is divided by its median step)."""
+               chain_starts, metric=None, rule: Optional[np.ndarray] = None) -> tuple:
+    """Stage 7: (status, reason, closure, poses, rule). The automatic loops and the steps make
+    one robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a
+    candidate with the reason.
+
+    The solved map is a measurement of its own: a candidate whose ends it joins (through the
+    path and the kept loops) and puts within ``auto_distance_steps``, and whose views share
+    ``auto_measured_share`` of a step's inliers, is one place measured by the map where its
+    two views could not measure it (the "measured" fact with the map's distance; rule "the
+    map closes it"). It joins the graph as a robust loop like the others, and the graph is
+    solved again; what that solution rejects goes back to the queue with the reason.
+
+    A candidate whose ends the solved map puts further apart than ``closure_slack`` +
+    ``closure_rate`` per step of the graph between them is dropped (weak evidence, and the
+    map against it). ``closure``: the ends' distance in the solved map, node steps (NaN
+    without geometry; with ``metric`` the map is in metres, and the distance is divided by
+    its median step)."""
     n = len(pairs)
     reason = np.full(n, "", dtype=object)
     closure = np.full(n, np.nan)
+    rule = np.full(n, "", dtype=object) if rule is None else rule.copy()
     steps = geometry.steps(params)
     if steps is None:
-        return status, reason, closure, None
-    auto = np.flatnonzero(status == Status.AUTO.value)
-    loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto])
-    solution = pose_graph.solve(m, steps, loops, params, chain_starts,
-                                extra_keys=np.concatenate([pairs.a, pairs.b]), metric=metric)
-    xy = solution.poses[:, :2]
-    closure = np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1) / solution.unit
+        return status, reason, closure, None, rule
     status = status.copy()
+
+    def solve():
+        auto = np.flatnonzero(status == Status.AUTO.value)
+        loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto])
+        solution = pose_graph.solve(m, steps, loops, params, chain_starts,
+                                    extra_keys=np.concatenate([pairs.a, pairs.b]), metric=metric)
+        xy = solution.poses[:, :2]
+        return auto, solution, np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1) / solution.unit
+
+    auto, solution, closure = solve()
+    cand = np.setdiff1d(np.flatnonzero(status == Status.CANDIDATE.value), auto[~solution.kept])
+    if pairs.inliers is None or pairs.step_inliers is None:   # not measured: nothing to share
+        cand = cand[:0]
+    shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.auto_measured_share * pairs.step_inliers[cand]) \
+        if cand.size else np.zeros(0, bool)
+    closes = cand[shared & (closure[cand] <= params.auto_distance_steps)]
+    if closes.size:
+        closes = closes[np.isfinite(solution.hops(pairs.a[closes], pairs.b[closes]))]
+    if closes.size:
+        status[closes], rule[closes] = Status.AUTO.value, "the map closes it"
+        auto, solution, closure = solve()
     rejected = auto[~solution.kept]
-    status[rejected] = Status.CANDIDATE.value
+    status[rejected], rule[rejected] = Status.CANDIDATE.value, ""
     reason[rejected] = "the pose graph rejects it: the path and the other loops disagree"
-    cand = np.flatnonzero(status == Status.CANDIDATE.value)
-    cand = np.setdiff1d(cand, rejected)
+    cand = np.setdiff1d(np.flatnonzero(status == Status.CANDIDATE.value), rejected)
     if cand.size:
         tolerance = params.closure_slack + params.closure_rate * solution.hops(pairs.a[cand], pairs.b[cand])
         status[cand[closure[cand] > tolerance]] = Status.DROPPED.value
-    return status, reason, closure, solution.poses
+    return status, reason, closure, solution.poses, rule
 
 
 def _evidence(pairs: Pairs, i: int, rule: str, reason: str, closure: float) -> dict:
