@@ -157,3 +157,53 @@ def test_every_automatic_loop_names_the_rule_that_made_it():
     status, rule = _tiers(c, P)
     assert status.tolist() == ["auto", ""]
     assert rule[0] in [name for name, _needs, _score in AUTO_RULES] and rule[1] == ""
+
+
+# ------------------------------------------------------------------ stage 7: the map as a measurement
+
+class _Steps:
+    """The geometry ``consistent`` asks for: a square walked twice, 10 straight steps per side."""
+
+    def __init__(self, m):
+        from engine.loops.pairs import Steps
+
+        yaw = np.array([90.0 if (i + 1) % 10 == 0 else 0.0 for i in range(m - 1)])
+        self._steps = Steps(yaw=yaw, motion=np.zeros(m - 1), still=np.zeros(m - 1, bool),
+                            ambiguous=np.zeros(m - 1, bool))
+
+    def steps(self, params):
+        return self._steps
+
+
+def test_a_candidate_the_solved_map_closes_becomes_automatic_and_one_it_puts_apart_does_not():
+    from engine.loops.verified import consistent
+
+    m = 81                                 # node 40 + k is node k again (two laps of 40 steps)
+    # an automatic loop closes the square; candidates: the same place a lap later (44, 84 - 40),
+    # and a look-alike on the opposite side (15 -> 45 is 20 nodes round: 10 steps away)
+    c = matches([0, 4, 15], [40, 44, 65], score=[6.0, 3.2, 3.2], inliers=[60, 30, 30], step=[40, 40, 40],
+                yaw=[0.0, 0.0, 0.0])
+    status = np.array(["auto", "candidate", "candidate"], dtype=object)
+    out, reason, closure, poses, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert out[1] == "auto" and rule[1] == "the map closes it"
+    assert out[2] != "auto" and closure[2] > 5.0
+    assert closure[1] <= P.auto_distance_steps
+
+
+def test_the_map_does_not_close_a_candidate_whose_views_share_too_little():
+    from engine.loops.verified import consistent
+
+    m = 81
+    c = matches([0, 4], [40, 44], score=[6.0, 3.2], inliers=[60, 5], step=[40, 40], yaw=[0.0, 0.0])
+    status = np.array(["auto", "candidate"], dtype=object)
+    out, _, _, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert out[1] != "auto" and rule[1] == ""
+
+
+def test_two_recordings_no_loop_joins_are_not_closed_by_their_arbitrary_placement():
+    from engine.loops.verified import consistent
+
+    m = 82                                 # two recordings of 41 nodes, both start at the origin
+    c = matches([2], [43], score=[3.2], inliers=[30], step=[40], yaw=[0.0])
+    out, _, _, _, rule = consistent(c, np.array(["candidate"], dtype=object), _Steps(m), P, m, (0, 41))
+    assert out[0] != "auto"
