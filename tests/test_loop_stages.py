@@ -207,3 +207,16 @@ def test_two_recordings_no_loop_joins_are_not_closed_by_their_arbitrary_placemen
     c = matches([2], [43], score=[3.2], inliers=[30], step=[40], yaw=[0.0])
     out, _, _, _, rule = consistent(c, np.array(["candidate"], dtype=object), _Steps(m), P, m, (0, 41))
     assert out[0] != "auto"
+
+
+def test_a_distance_the_two_views_measured_outranks_the_map():
+    """An offset return 1.5 steps to the side: the loops pull the map's ends together, the two
+    views measured them apart; the measurement stands."""
+    from engine.loops.verified import consistent
+
+    m = 81
+    c = matches([0, 4], [40, 44], score=[6.0, 3.2], inliers=[60, 30], step=[40, 40], yaw=[0.0, 0.0])
+    c.distance_steps = np.array([np.nan, 1.5])
+    status = np.array(["auto", "candidate"], dtype=object)
+    out, _, _, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert out[1] != "auto" and rule[1] == ""

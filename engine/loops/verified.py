@@ -98,7 +98,8 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     path and the kept loops) and puts within ``auto_distance_steps``, and whose views share
     ``auto_measured_share`` of a step's inliers, is one place measured by the map where its
     two views could not measure it (the "measured" fact with the map's distance; rule "the
-    map closes it"). It joins the graph as a robust loop like the others, and the graph is
+    map closes it"). A distance the two views did measure outranks the map's: the loops
+    pull the map's ends together, so it cannot tell a return 1.5 steps to the side. It joins the graph as a robust loop like the others, and the graph is
     solved again; what that solution rejects goes back to the queue with the reason.
 
     A candidate whose ends the solved map puts further apart than ``closure_slack`` +
@@ -129,7 +130,8 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
         cand = cand[:0]
     shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.auto_measured_share * pairs.step_inliers[cand]) \
         if cand.size else np.zeros(0, bool)
-    closes = cand[shared & (closure[cand] <= params.auto_distance_steps)]
+    unmeasured = ~np.isfinite(pairs.distance_steps[cand]) if pairs.distance_steps is not None else np.ones(cand.size, bool)
+    closes = cand[shared & unmeasured & (closure[cand] <= params.auto_distance_steps)]
     if closes.size:
         closes = closes[np.isfinite(solution.hops(pairs.a[closes], pairs.b[closes]))]
     if closes.size:
