@@ -97,7 +97,10 @@ def segment_labels(n: int, segment: Optional[np.ndarray]) -> np.ndarray:
 
 def temporal_neighbours(a: np.ndarray, b: np.ndarray, exclude: int, segment: np.ndarray) -> np.ndarray:
     """True where rows a and b are within ``exclude`` rows of each other in one recording."""
-    return (np.abs(a - b) <= exclude) & (segment[a] == segment[b])
+    near = np.abs(a - b) <= exclude
+    if segment.size == 0 or segment[-1] == 0:   # one recording (labels are contiguous from 0)
+        return near
+    return near & (segment[a] == segment[b])
 
 
 def block_rows_for(n: int, budget: int = BLOCK_ELEMENTS) -> int:
