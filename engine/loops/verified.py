@@ -138,7 +138,8 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
         status[closes], rule[closes] = Status.AUTO.value, "the map closes it"
         auto, solution, closure = solve()
     rejected = auto[~solution.kept]
-    status[rejected], rule[rejected] = Status.CANDIDATE.value, ""
+    status[rejected] = Status.CANDIDATE.value
+    rule[np.intersect1d(rejected, closes)] = ""   # the map's own measurement does not stand
     reason[rejected] = "the pose graph rejects it: the path and the other loops disagree"
     cand = np.setdiff1d(np.flatnonzero(status == Status.CANDIDATE.value), rejected)
     if cand.size:
