@@ -74,12 +74,6 @@ def recording_of(m: int, chain_starts=(0,)) -> np.ndarray:
     return (np.searchsorted(starts[starts > 0], np.arange(m), side="right")).astype(np.int64)
 
 
-def temporal_neighbours(a: np.ndarray, b: np.ndarray, within: int, recording: np.ndarray) -> np.ndarray:
-    """True where nodes a and b are at most ``within`` nodes apart in one recording."""
-    a, b = np.asarray(a, np.int64), np.asarray(b, np.int64)
-    return (np.abs(b - a) <= within) & (recording[a] == recording[b])
-
-
 def wrap_degrees(deg):
     """Angles in degrees wrapped to [-180, 180)."""
     return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0

@@ -17,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import MapParams
-from .pairs import Pairs, Status, temporal_neighbours
+from ..retrieval import temporal_neighbours
+from .pairs import Pairs, Status
 from .places import PlaceGrid
 from .retrieve import descriptor_rank, scored, with_support
 
