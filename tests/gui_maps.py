@@ -97,3 +97,32 @@ def boxes(monkeypatch):
         monkeypatch.setattr(QMessageBox, kind, lambda *a, k=kind, **kw: shown.append((k, a[2])) or QMessageBox.Ok)
     monkeypatch.setattr(QMessageBox, "question", lambda *a, **kw: shown.append(("question", a[2])) or QMessageBox.No)
     return shown
+
+
+def window_maker(qtbot, tmp_path, method=None, size=None):
+    """For a ``make_window`` fixture (``yield from``): ``make(size=...)`` builds a shown
+    MainWindow with settings and cache under ``tmp_path`` (``method`` chosen in its panel,
+    resized to ``size`` when given); every window made is shut down afterwards, its changes
+    marked saved so that no question is asked."""
+    from PySide6.QtCore import QSettings
+
+    from gui.main_window import MainWindow
+
+    windows = []
+
+    def make(size=size):
+        w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), cache_root=str(tmp_path))
+        qtbot.addWidget(w)
+        if method is not None:
+            w.params_panel.method.setCurrentIndex(w.params_panel.method.findData(method))
+        if size is not None:
+            w.resize(*size)
+        w.show()
+        windows.append(w)
+        return w
+
+    yield make
+    for w in windows:
+        w.undo_stack.setClean()
+        w._extra_dirty = False
+        w.shutdown()

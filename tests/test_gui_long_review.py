@@ -8,33 +8,18 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from PySide6.QtCore import Qt  # noqa: E402
 from PySide6.QtWidgets import QMessageBox, QTableWidget  # noqa: E402
 
 from engine.session_fields import LABEL_MAX  # noqa: E402
-from gui.main_window import MainWindow  # noqa: E402
-from gui_maps import boxes  # noqa: E402,F401  (a fixture)
+from gui_maps import window_maker, boxes  # noqa: E402,F401  (a fixture)
 from test_app_model import make_map  # noqa: E402
 from test_gui_review import _route_descriptors  # noqa: E402
 
 
 @pytest.fixture
 def make_window(qtbot, tmp_path, boxes):
-    windows = []
-
-    def make(size=(1280, 720)) -> MainWindow:
-        w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), cache_root=str(tmp_path))
-        qtbot.addWidget(w)
-        w.resize(*size)
-        w.show()
-        windows.append(w)
-        return w
-
-    yield make
-    for w in windows:
-        w.undo_stack.setClean()
-        w._extra_dirty = False
-        w.shutdown()
+    yield from window_maker(qtbot, tmp_path, size=(1280, 720))
 
 
 def open_and_run(qtbot, w, path) -> None:

@@ -16,11 +16,10 @@ import pytest
 
 pytest.importorskip("pytestqt")
 
-from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from PySide6.QtCore import Qt  # noqa: E402
 from PySide6.QtWidgets import QMessageBox  # noqa: E402
 
-from gui.main_window import MainWindow  # noqa: E402
-from gui_maps import boxes, colour_pixels  # noqa: E402,F401  (a fixture)
+from gui_maps import window_maker, boxes, colour_pixels  # noqa: E402,F401  (a fixture)
 from test_gui_site_model import NAMES, frame_code, make_site_files  # noqa: E402
 
 AB = ("A.npz", "B.npz")
@@ -28,22 +27,7 @@ AB = ("A.npz", "B.npz")
 
 @pytest.fixture
 def make_window(qtbot, tmp_path, boxes):
-    windows = []
-
-    def make() -> MainWindow:
-        w = MainWindow(settings=QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat), cache_root=str(tmp_path))
-        qtbot.addWidget(w)
-        w.params_panel.method.setCurrentIndex(w.params_panel.method.findData("verified"))
-        w.resize(1280, 720)
-        w.show()
-        windows.append(w)
-        return w
-
-    yield make
-    for w in windows:
-        w.undo_stack.setClean()
-        w._extra_dirty = False
-        w.shutdown()
+    yield from window_maker(qtbot, tmp_path, method="verified", size=(1280, 720))
 
 
 def open_site(qtbot, w, paths) -> None:
