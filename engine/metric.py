@@ -9,8 +9,8 @@
 - ``gps_dop``: the fix's dilution of precision where the recording gives one (GPMF), NaN
   elsewhere; the pose graph's sigma is ``gps_dop_sigma_m`` per unit of it, or ``gps_sigma_m``.
 
-``engine.loops.pose_graph.solve`` turns these into step and position factors and solves the
-graph in metres; without them (``Metric.empty``) it stays image-only, in node steps.
+``engine.metric_factors`` turns these into the pose graph's step and position factors, solved
+in metres; without them (``Metric.empty``) it stays image-only, in node steps.
 ``read_metric`` reads them from a recording (``engine.run`` calls it); nothing here is ground
 truth, and none of it is used for evaluation.
 """

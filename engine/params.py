@@ -187,19 +187,23 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("graph_inlier_probability", float, 0.99, _NEW,
               "a loop the robust pose graph keeps fits at this chi-square probability",
               "the usual 99 % of robust back ends (Kimera-RPGO, GTSAM's GNC default)", 0.5, 0.999999),
-    # Metric factors (engine/metric.py): a recording's own odometry or GPS puts the pose graph in
+    # Metric factors (engine/metric_factors.py): a recording's own odometry or GPS puts the pose graph in
     # metres. None of these was tuned on a recording of this project; each comes from the
     # sensor's usual figures, said below.
     Parameter("odom_sigma_rate", float, 0.05, _NEW,
               "uncertainty of an odometry step's position in the pose graph, as a share of its length "
-              "(a step shorter than 0.1 m counts 0.1 m)",
+              "(a step shorter than odom_min_step_m counts that long)",
               "wheel odometry of a calibrated robot drifts 1-5 % of the distance travelled (Borenstein "
               "and Feng's UMBmark); the upper end, so that loops and GPS can correct it", 1e-4, 10.0),
     Parameter("odom_turn_sigma_deg", float, 1.0, _NEW,
               "uncertainty of an odometry step's turn in the pose graph, degrees per metre travelled "
-              "(a step shorter than 0.1 m counts 0.1 m)",
+              "(a step shorter than odom_min_step_m counts that long)",
               "gyro-aided odometry drifts well under a degree per metre, wheels alone about that much; "
               "the conservative end", 1e-4, 180.0),
+    Parameter("odom_min_step_m", float, 0.1, _NEW,
+              "an odometry step shorter than this (metres) is as uncertain as one this long",
+              "a turn on the spot or a stop still has noise: a wheel slips a few centimetres, so "
+              "a step's sigma never falls below that of a 0.1 m step", 1e-4, 100.0),
     Parameter("gps_sigma_m", float, 3.0, _NEW,
               "position uncertainty of a GPS fix that does not say its precision (EXIF), metres",
               "GPS.gov: a phone's GPS is within 4.9 m 95 % of the time under open sky, about 2 m one "

@@ -143,7 +143,7 @@ def test_gps_precision_sets_the_factor_sigma():
 
 
 def test_a_long_recording_gets_gps_factors_every_few_metres_not_on_every_node():
-    from engine.loops.pose_graph import _gps_nodes
+    from engine.metric_factors import gps_nodes as _gps_nodes
 
     m, steps, xy, _ = _route([(400, 90), (400, 90), (400, 0)], step_m=1.0)
     metric = Metric(gps=_gps(xy))
