@@ -343,7 +343,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
     at_nodes = None
     if p.method == "verified":
         from .loops.geometry import PairGeometry
-        from .loops.pose_graph import step_measurements
+        from .loops.pose_graph import step_factors
         from .loops.verified import detect_loops as verified
 
         cache = descs.cache.setdefault(("nodes", p.node_sim_th), {})
@@ -359,7 +359,8 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         loops, poses = found.loops, found.poses
         if poses is not None:   # the step factors, for the g2o export (fits already cached)
             fitted = PairGeometry(features, node_rows, descs.shifts[node_rows], frame_width, columns, cache).steps(p)
-            steps = None if fitted is None else step_measurements(fitted, chain_starts, p, at_nodes)
+            f = None if fitted is None else step_factors(fitted, chain_starts, p, at_nodes)
+            steps = None if f is None else (f.dx, f.dy, f.dt, f.sigma_xy, f.sigma_t)
     else:
         loops = detect_loops(descs.vectors[node_rows], p)
     extra = {"descriptor": descs.meta.get("descriptor", ""), "interval": float(descs.meta.get("interval", 0.0))}

@@ -180,6 +180,20 @@ def shift_to_yaw_deg(columns: float, width: int) -> float:
     return 180.0 if deg == -180.0 else deg
 
 
+def wrap_degrees(deg):
+    """Angles in degrees wrapped to [-180, 180) (arrays too)."""
+    return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
+
+
+def original_yaw(yaw_shifted, shift_a, shift_b, frame_width: int) -> np.ndarray:
+    """The convention above for arrays: the relative heading of the original frames from that
+    of the panorama-shifted ones (``frame_width`` 0: not shifted)."""
+    if frame_width <= 0:
+        return np.asarray(yaw_shifted, np.float64)
+    return wrap_degrees(np.asarray(yaw_shifted, np.float64)
+                        + (np.asarray(shift_b) - np.asarray(shift_a)) * 360.0 / frame_width)
+
+
 def yaw_to_columns(yaw_deg: float, width: int) -> int:
     """Degrees to the nearest whole column shift in [0, width)."""
     return int(round(float(yaw_deg) * width / 360.0)) % int(width)

@@ -95,3 +95,14 @@ def test_a_map_without_a_pose_graph_is_one_line(described, tmp_path, capsys):
     rc = main(["map", str(described[1]), "-o", str(tmp_path / "m.g2o"), "--method", "shift-simple", "-q"])
     err = capsys.readouterr().err
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "g2o" in err and "Traceback" not in err
+
+
+def test_a_recording_shorter_than_the_temporal_window_still_gets_its_path_poses(described):
+    """No pair lies beyond the temporal window, so there is no loop; the pose graph of the
+    steps alone still gives every node a pose, one step apart where the camera moved."""
+    descs = described[0]
+    topomap = build_map(descs, MapParams(neighbor_node_num=len(descs)))
+    assert not [e for e in topomap.graph.edges(data=True) if e[2].get("kind") == "loop"]
+    x, y = topomap.positions(estimated=True)
+    gaps = np.hypot(np.diff(x), np.diff(y))
+    assert np.all(gaps < 1.5) and np.median(gaps) > 0.5

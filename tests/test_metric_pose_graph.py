@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from engine.loops.pairs import Steps
-from engine.loops.pose_graph import Loops, solve, step_measurements
+from engine.loops.pose_graph import Loops, solve, step_factors
 from engine.metric import Metric
 from engine.params import MapParams
 
@@ -56,8 +56,8 @@ def test_without_metric_data_the_image_only_solution_is_unchanged(metric):
         assert np.array_equal(sol.kept, ref[name + "_kept"]) and sol.unit == 1.0
         assert np.array_equal(sol.outvoted_steps, ref[name + "_outvoted"])
         assert sol.hops(np.array([2]), np.array([min(50, m - 1)]))[0] == ref[name + "_hops"][0]
-        np.testing.assert_array_equal(np.array(step_measurements(steps, starts, MapParams(), given)),
-                                      ref[name + "_steps"])
+        f = step_factors(steps, starts, MapParams(), given)
+        np.testing.assert_array_equal(np.array([f.dx, f.dy, f.dt, f.sigma_xy, f.sigma_t]), ref[name + "_steps"])
 
 
 # --- a route with GPS: out along a street, back along another 30 m away, and on over the start
@@ -175,8 +175,8 @@ def test_odometry_gives_the_steps_and_the_frame():
     turn = (sol.poses[:, 2] - np.degrees(odom[:, 2]) + 180) % 360 - 180
     assert np.abs(turn).max() < 1e-6
     assert sol.unit == pytest.approx(0.8)
-    dx, dy, dt, sxy, st = step_measurements(steps, (0,), MapParams(), Metric(odometry=odom))
-    assert np.allclose(np.hypot(dx, dy), 0.8) and np.allclose(sxy, 0.05 * 0.8)
+    f = step_factors(steps, (0,), MapParams(), Metric(odometry=odom))
+    assert np.allclose(np.hypot(f.dx, f.dy), 0.8) and np.allclose(f.sigma_xy, 0.05 * 0.8)
 
 
 def test_odometry_that_drifts_is_corrected_by_a_true_loop_and_a_false_one_rejected():

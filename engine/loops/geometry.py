@@ -18,18 +18,11 @@ import numpy as np
 
 from .. import sphere
 from ..params import MapParams
-from .pairs import Pairs, Steps, wrap_degrees
+from ..shift import original_yaw, wrap_degrees
+from .pairs import Pairs, Steps
 
 # Columns of a fit row (``PairGeometry.fits``).
 MATCHES, INLIERS, RATIO, YAW, MOTION, PLANE, PARALLAX = range(7)
-
-
-def original_yaw(yaw_shifted, shift_a, shift_b, frame_width: int) -> np.ndarray:
-    """Relative heading of the original frames from that of the panorama-shifted ones."""
-    if frame_width <= 0:
-        return np.asarray(yaw_shifted, np.float64)
-    return wrap_degrees(np.asarray(yaw_shifted, np.float64)
-                        + (np.asarray(shift_b) - np.asarray(shift_a)) * 360.0 / frame_width)
 
 
 class PairGeometry:
@@ -97,22 +90,18 @@ class PairGeometry:
         rows, m, rec = self.node_rows, self.node_rows.size, self.recording
         out = np.full(a.size, np.nan)
         for k, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
-            near = tuple(int(rows[n]) if 0 <= n < m and rec[n] == rec[e] else -1
-                         for n, e in ((i - 1, i), (i, i), (i + 1, i), (j - 1, j), (j, j), (j + 1, j)))
-            if near not in store:
-                loop = self.two_view(rows[i], rows[j])
-                ends = []
-                for end, side in ((i, 0), (j, 1)):
-                    ratios = []
-                    for other in (end - 1, end + 1):
-                        if 0 <= other < m and rec[other] == rec[end] and other not in (i, j):
-                            lo, hi = min(end, other), max(end, other)
-                            step = self.two_view(rows[lo], rows[hi])
-                            ratios.append(sphere.baseline_ratio(loop, side, step, 0 if lo == end else 1))
-                    ratios = [r for r in ratios if np.isfinite(r)]
-                    ends.append(float(np.median(ratios)) if ratios else np.nan)
-                store[near] = float(np.mean(ends)) if all(np.isfinite(ends)) else np.nan
-            out[k] = store[near]
+            near = [(end, side, o) for end, side in ((i, 0), (j, 1)) for o in (end - 1, end + 1)
+                    if 0 <= o < m and rec[o] == rec[end] and o not in (i, j)]
+            key = (int(rows[i]), int(rows[j])) + tuple((side, int(rows[o])) for _, side, o in near)
+            if key not in store:
+                loop, ratios = self.two_view(rows[i], rows[j]), ([], [])
+                for end, side, o in near:
+                    step = self.two_view(rows[min(end, o)], rows[max(end, o)])
+                    r = sphere.baseline_ratio(loop, side, step, 0 if end < o else 1)
+                    if np.isfinite(r):
+                        ratios[side].append(r)
+                store[key] = float(np.mean([np.median(r) for r in ratios])) if all(ratios) else np.nan
+            out[k] = store[key]
         return out
 
     def column_yaw(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:

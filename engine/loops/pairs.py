@@ -74,11 +74,6 @@ def recording_of(m: int, chain_starts=(0,)) -> np.ndarray:
     return (np.searchsorted(starts[starts > 0], np.arange(m), side="right")).astype(np.int64)
 
 
-def wrap_degrees(deg):
-    """Angles in degrees wrapped to [-180, 180)."""
-    return (np.asarray(deg, np.float64) + 180.0) % 360.0 - 180.0
-
-
 @dataclass
 class LoopCandidate:
     a: int                        # node index, a < b

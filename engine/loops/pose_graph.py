@@ -91,13 +91,6 @@ def step_factors(steps: Steps, chain_starts: Sequence[int], params: MapParams,
     return f
 
 
-def step_measurements(steps: Steps, chain_starts: Sequence[int], params: MapParams,
-                      metric: Optional["Metric"] = None):
-    """``step_factors`` as the g2o export reads them: (dx, dy, dtheta, sigma_xy, sigma_theta)."""
-    f = step_factors(steps, chain_starts, params, metric)
-    return f.dx, f.dy, f.dt, f.sigma_xy, f.sigma_t
-
-
 def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
           chain_starts: Sequence[int] = (0,), extra_keys: Sequence[int] = (),
           metric: Optional["Metric"] = None) -> Solution:

@@ -57,8 +57,10 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     shifts = np.zeros(m, np.int64) if shifts is None else np.asarray(shifts, np.int64)
     recording = recording_of(m, chain_starts)
     geometry = PairGeometry(features, node_rows, shifts, frame_width, columns, cache, recording)
-    if m <= params.neighbor_node_num + 1:
-        return LoopResult([], _path_only(geometry, params, m, chain_starts, metric))
+    if m <= params.neighbor_node_num + 1:   # no pair beyond the temporal window: the path's poses alone
+        e = np.zeros(0)
+        nothing = Pairs(a=e.astype(np.int64), b=e.astype(np.int64), cosine=e, score=e, yaw=e)
+        return LoopResult([], consistent(nothing, e.astype(object), geometry, params, m, chain_starts, metric)[3])
     pairs = with_support(v, recording, candidates(v, recording, params, cache), params, cache)    # 1, 2
     floor = params.candidate_z - params.geometry_margin_z
     pairs = pairs.take((pairs.score >= floor) | (np.nan_to_num(pairs.support, nan=-np.inf) >= floor))
@@ -79,34 +81,17 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     return LoopResult(out, poses)
 
 
-def _path_only(geometry: PairGeometry, params: MapParams, m: int, chain_starts, metric=None) -> Optional[np.ndarray]:
-    steps = geometry.steps(params)
-    if steps is None:
-        return None
-    empty = np.zeros(0, np.int64)
-    return pose_graph.solve(m, steps, pose_graph.Loops(empty, empty, np.zeros(0)), params, chain_starts,
-                            metric=metric).poses
-
-
 def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params: MapParams, m: int,
                chain_starts, metric=None, rule: Optional[np.ndarray] = None) -> tuple:
     """Stage 7: (status, reason, closure, poses, rule). The automatic loops and the steps make
     one robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a
-    candidate with the reason.
-
-    The solved map is a measurement of its own: a candidate whose ends it joins (through the
-    path and the kept loops) and puts within ``auto_distance_steps``, and whose views share
-    ``auto_measured_share`` of a step's inliers, is one place measured by the map where its
-    two views could not measure it (the "measured" fact with the map's distance; rule "the
-    map closes it"). A distance the two views did measure outranks the map's: the loops
-    pull the map's ends together, so it cannot tell a return 1.5 steps to the side. It joins the graph as a robust loop like the others, and the graph is
-    solved again; what that solution rejects goes back to the queue with the reason.
-
-    A candidate whose ends the solved map puts further apart than ``closure_slack`` +
-    ``closure_rate`` per step of the graph between them is dropped (weak evidence, and the
-    map against it). ``closure``: the ends' distance in the solved map, node steps (NaN
-    without geometry; with ``metric`` the map is in metres, and the distance is divided by
-    its median step)."""
+    candidate with the reason. The solved map is a measurement too (docs/method.md, stage 7):
+    a candidate whose ends it joins and puts within ``auto_distance_steps``, whose views share
+    ``auto_measured_share`` of a step's inliers but could not measure their distance, becomes
+    automatic (rule "the map closes it") and the graph is solved again with it. A candidate
+    the map puts further apart than ``closure_slack`` + ``closure_rate`` per step of the
+    graph between its ends is dropped. ``closure``: the ends' distance in the solved map,
+    node steps (NaN without geometry; in metres / the median step with ``metric``)."""
     n = len(pairs)
     reason = np.full(n, "", dtype=object)
     closure = np.full(n, np.nan)
@@ -149,17 +134,18 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
 
 
 def _evidence(pairs: Pairs, i: int, rule: str, reason: str, closure: float) -> dict:
-    known = pairs.inliers[i] >= 0
+    known = pairs.inliers[i] >= 0   # two-view geometry was measured
 
-    def num(arr, cast=float):
+    def value(name, cast=float):    # None where not measured
+        arr = getattr(pairs, name)
         return cast(arr[i]) if arr is not None and np.isfinite(arr[i]) else None
 
-    return {"score": float(pairs.score[i]), "support": num(pairs.support), "direction": int(pairs.direction[i]),
-            "matches": int(pairs.matches[i]) if known else None, "inliers": int(pairs.inliers[i]) if known else None,
-            "inlier_ratio": num(pairs.inlier_ratio) if known else None,
-            "path_inliers": int(pairs.path_inliers[i]) if known else None,
-            "step_inliers": int(pairs.step_inliers[i]) if known else None,
-            "confidence": float(pairs.confidence[i]),
-            "closure": float(closure) if np.isfinite(closure) else None,
-            "plane_share": num(pairs.plane_share), "distance_steps": num(pairs.distance_steps),
+    def fit(name, cast=int):
+        return value(name, cast) if known else None
+
+    return {"score": float(pairs.score[i]), "support": value("support"), "direction": int(pairs.direction[i]),
+            "matches": fit("matches"), "inliers": fit("inliers"), "inlier_ratio": fit("inlier_ratio", float),
+            "path_inliers": fit("path_inliers"), "step_inliers": fit("step_inliers"),
+            "confidence": float(pairs.confidence[i]), "closure": float(closure) if np.isfinite(closure) else None,
+            "plane_share": value("plane_share"), "distance_steps": value("distance_steps"),
             "rule": str(rule) or None, "reason": str(reason) or None}
