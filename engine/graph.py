@@ -42,6 +42,7 @@ without them belongs to the first session (a one-recording map grown into a site
 from __future__ import annotations
 
 import copy as _copy
+import io
 import json
 from pathlib import Path
 from typing import Iterable, Optional, Sequence
@@ -93,6 +94,70 @@ def _plain(value, kind=None):
 # networkx's own GraphML bookkeeping (read_graphml puts it into the graph's attributes; its
 # writer takes it as dicts): never a map attribute.
 _NETWORKX_KEYS = ("node_default", "edge_default")
+
+
+# GraphML as networkx writes it (``nx.write_graphml(g, f, infer_numeric_types=False)``, its
+# ElementTree writer, prettyprinted): its type names for the values ``_plain`` gives, and
+# ElementTree's escapes for text and for attribute values.
+_XML_TYPES = {int: "long", float: "double", str: "string"}
+_XML_TEXT = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;"})
+_XML_ATTR = str.maketrans({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "\r": "&#13;",
+                           "\n": "&#10;", "\t": "&#09;"})
+
+
+def _write_graphml(g: nx.Graph, f) -> None:
+    """Write ``g`` (values int, float or str) to the binary file ``f`` byte for byte as networkx
+    does, streamed. Without lxml networkx builds an ElementTree of the whole map first: 100k
+    nodes and 35k loops took 50 of the map's 270 s under cProfile, and the tree's memory
+    (benchmarks/bench_scale.py)."""
+    graph = {k: v for k, v in g.graph.items() if k not in _NETWORKX_KEYS}
+    gid = graph.pop("id", None)   # networkx writes a graph attribute "id" as the graph's own id
+    scopes = (("graph", [graph]), ("node", [d for _, d in g.nodes(data=True)]),
+              ("edge", [d for _, _, d in g.edges(data=True)]))
+    keys = {}   # (name, type, scope) -> key id, numbered in the order networkx meets them
+    for scope, dicts in scopes:
+        for d in dicts:
+            for k, v in d.items():
+                key = (str(k), _XML_TYPES[type(v)], scope)
+                if key not in keys:
+                    keys[key] = f"d{len(keys)}"
+    out = io.TextIOWrapper(f, encoding="utf-8", errors="xmlcharrefreplace", newline="\n")
+    w = out.write
+
+    def data(pad: str, values: dict, scope: str) -> None:
+        for k, v in values.items():
+            key = keys[(str(k), _XML_TYPES[type(v)], scope)]
+            text = v.translate(_XML_TEXT) if type(v) is str else str(v)
+            w(f'{pad}<data key="{key}">{text}</data>\n' if text else f'{pad}<data key="{key}" />\n')
+
+    def element(pad: str, head: str, tag: str, values: dict, scope: str) -> None:
+        if not values:
+            w(f"{pad}<{head} />\n")
+            return
+        w(f"{pad}<{head}>\n")
+        data(pad + "  ", values, scope)
+        w(f"{pad}</{tag}>\n")
+
+    w("<?xml version='1.0' encoding='utf-8'?>\n<graphml xmlns=\"http://graphml.graphdrawing.org/xmlns\" "
+      "xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" xsi:schemaLocation=\"http://graphml.graphdrawing."
+      "org/xmlns http://graphml.graphdrawing.org/xmlns/1.0/graphml.xsd\">\n")
+    for (name, kind, scope), key in reversed(keys.items()):
+        w(f'  <key id="{key}" for="{scope}" attr.name="{name.translate(_XML_ATTR)}" attr.type="{kind}" />\n')
+    head = 'graph edgedefault="undirected"' + ("" if gid is None else f' id="{str(gid).translate(_XML_ATTR)}"')
+    if g.number_of_nodes() == 0:
+        element("  ", head, "graph", graph, "graph")
+    else:   # the graph's own data come after its nodes and edges
+        w(f"  <{head}>\n")
+        for n, d in g.nodes(data=True):
+            element("    ", f'node id="{str(n).translate(_XML_ATTR)}"', "node", d, "node")
+        for u, v, d in g.edges(data=True):
+            element("    ", f'edge source="{str(u).translate(_XML_ATTR)}" target="{str(v).translate(_XML_ATTR)}"',
+                    "edge", d, "edge")
+        data("    ", graph, "graph")
+        w("  </graph>\n")
+    w("</graphml>\n")
+    out.flush()
+    out.detach()   # leave ``f`` open for the caller
 
 
 def _clean_meta(meta: dict) -> dict:
@@ -468,7 +533,7 @@ class TopoMap:
         from .outputs import write_atomically
 
         g = self.corrected(keep_rejected, keep_candidates)
-        write_atomically(path, lambda f: nx.write_graphml(g, f, infer_numeric_types=False))
+        write_atomically(path, lambda f: _write_graphml(g, f))
 
     @classmethod
     def read_graphml(cls, path: str | Path) -> "TopoMap":

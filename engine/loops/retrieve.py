@@ -49,7 +49,7 @@ def candidates(vectors: np.ndarray, recording: np.ndarray, params: MapParams, ca
     rows = np.repeat(np.arange(m, dtype=np.int64), k)
     cols = neigh.index.reshape(-1).astype(np.int64)
     ok = cols >= 0
-    pair = np.unique(np.minimum(rows[ok], cols[ok]) * m + np.maximum(rows[ok], cols[ok]))
+    pair = retrieval.sorted_unique(np.minimum(rows[ok], cols[ok]) * m + np.maximum(rows[ok], cols[ok]))
     return scored(vectors, background(vectors, recording, params, cache), pair // m, pair % m)
 
 
@@ -58,16 +58,18 @@ def with_support(vectors: np.ndarray, recording: np.ndarray, pairs: Pairs, param
     calibrated score along the stretch; NaN where there is none) and its ``direction``.
     Each pair's two means are cached, so a re-map computes only pairs it has not seen."""
     stats = background(vectors, recording, params, cache)
-    store = cache.setdefault(("support",) + _key(vectors, recording, params.support_half, params.neighbor_node_num), {})
+    key = ("support",) + _key(vectors, recording, params.support_half, params.neighbor_node_num)
     m = vectors.shape[0]
     ids = pairs.a * m + pairs.b
-    todo = np.unique(ids[[int(i) not in store for i in ids.tolist()]]) if ids.size else ids
+    seen, means = cache.get(key, (np.zeros(0, np.int64), np.zeros((0, 2))))   # pair ids sorted, their means
+    todo = np.setdiff1d(retrieval.sorted_unique(ids), seen, assume_unique=True)
     if todo.size:
-        a, b = todo // m, todo % m
-        fwd, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, +1)
-        rev, _ = retrieval.diagonal_support(vectors, stats, a, b, params.support_half, -1)
-        store.update(zip(todo.tolist(), zip(fwd.tolist(), rev.tolist())))
-    both = np.array([store[i] for i in ids.tolist()], np.float64).reshape(-1, 2)
+        new = [retrieval.diagonal_support(vectors, stats, todo // m, todo % m, params.support_half, d)[0]
+               for d in (+1, -1)]
+        seen, means = np.concatenate([seen, todo]), np.concatenate([means, np.stack(new, axis=1)])
+        order = np.argsort(seen)
+        seen, means = cache[key] = seen[order], means[order]
+    both = means[np.searchsorted(seen, ids)]
     fwd, rev = np.nan_to_num(both[:, 0], nan=-np.inf), np.nan_to_num(both[:, 1], nan=-np.inf)
     best = np.maximum(fwd, rev)
     pairs.support = np.where(np.isfinite(best), best, np.nan)
