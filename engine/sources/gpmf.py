@@ -10,10 +10,13 @@ per packet (about 1 s); samples of a payload are spread evenly over the packet's
 
 Read here: ``GPS5`` (lat, lon degrees, altitude m, 2D and 3D speed; fix ``GPSF`` and
 precision ``GPSP`` = DOP x 100 per payload), ``GPS9`` (the same plus days, seconds, DOP and
-fix per sample, HERO11 on), ``CORI`` (camera orientation quaternions w, x, y, z relative to
-the orientation at the start), ``GYRO`` (rad/s). A GPS sample is used when its fix is at
-least ``MIN_FIX`` (3: a 3D fix) and its DOP below ``MAX_DOP`` (5: GoPro's own advice is a
-GPSP under 500); positions are metres east/north of the first used fix
+fix per sample, HERO11 on), ``GPRI`` (a GoPro Karma drone's own GPS, MAVLink ``GPS_RAW_INT``
+in the drone's ``DEVC``: time, lat, lon, alt, HDOP, VDOP, speed, course, fix, satellites; used
+where the camera wrote no GPS of its own, as a HERO5 on a Karma does), ``CORI`` (camera
+orientation quaternions w, x, y, z relative to the orientation at the start), ``GYRO`` (rad/s,
+in the camera's own axis order: HERO5 and Fusion name it "Gyroscope (z,x,y)"). A GPS sample
+is used when its fix is at least ``MIN_FIX`` (3: a 3D fix) and its DOP below ``MAX_DOP`` (5:
+GoPro's own advice is a GPSP under 500); positions are metres east/north of the first used fix
 (``engine.sources.geo.local_metres``). Stamps are seconds on the video's clock (0 at its
 first frame).
 
@@ -127,7 +130,9 @@ class Telemetry:
 
 
 def payload_samples(payload: bytes, t0: float, duration: float, out: dict) -> None:
-    """Add the samples of one payload (``t0`` .. ``t0 + duration`` s) to ``out`` (lists by key)."""
+    """Add the samples of one payload (``t0`` .. ``t0 + duration`` s) to ``out`` (lists by key).
+    A Karma drone's GPS (``GPRI``) counts only in a payload without the camera's own GPS."""
+    camera_gps, drone_gps = False, []
     for devc in parse_klv(payload):
         for strm in (c for c in devc.children if c.key == "STRM"):
             scal, ctype, fix, dop = strm.find("SCAL"), "", None, None
@@ -139,10 +144,14 @@ def payload_samples(payload: bytes, t0: float, duration: float, out: dict) -> No
                 elif item.key == "GPSP":
                     dop = float(values(item).ravel()[0]) / 100.0
             for item in strm.children:
-                if item.key not in ("GPS5", "GPS9", "CORI", "GYRO") or item.repeat == 0:
+                if item.key not in ("GPS5", "GPS9", "GPRI", "CORI", "GYRO") or item.repeat == 0:
                     continue
                 v = _scaled(item, scal, ctype)
                 t = t0 + np.arange(item.repeat) * (duration / item.repeat)
+                if item.key == "GPRI":   # time, lat, lon, alt, HDOP, VDOP, speed, course, fix, satellites
+                    drone_gps.append((t, v[:, 1:4], v[:, 8], v[:, 4]))
+                    continue
+                camera_gps |= item.key in ("GPS5", "GPS9")
                 if item.key == "GPS5":
                     n = len(v)
                     out["gps"].append((t, v[:, :3], np.full(n, np.nan if fix is None else fix),
@@ -153,6 +162,8 @@ def payload_samples(payload: bytes, t0: float, duration: float, out: dict) -> No
                     out["cori"].append((t, v[:, :4]))
                 else:
                     out["gyro"].append((t, v[:, :3]))
+    if not camera_gps:
+        out["gps"].extend(drone_gps)
 
 
 def read_telemetry(path: Path) -> Optional[Telemetry]:
