@@ -46,6 +46,18 @@ def test_gps5_values_are_scaled_to_degrees_and_metres():
     assert np.allclose(tel.gps_t, np.arange(10) / 10)       # spread evenly over the payload
 
 
+def test_fixed_point_values_are_scaled_as_the_spec_says():
+    """GPMF types q (Q15.16) and Q (Q31.32) are fixed-point numbers, also inside a complex TYPE."""
+    import struct
+
+    plain = struct.pack(">4scBH", b"TSTq", b"q", 4, 2) + struct.pack(">ii", 3 * 2 ** 15, -2 ** 14)
+    wide = struct.pack(">4scBH", b"TSTQ", b"Q", 8, 1) + struct.pack(">q", 5 * 2 ** 31)
+    (q,), (big,) = gpmf.parse_klv(plain), gpmf.parse_klv(wide)
+    assert np.allclose(gpmf.values(q).ravel(), [1.5, -0.25]) and np.allclose(gpmf.values(big), 2.5)
+    mixed = struct.pack(">4scBH", b"TSTC", b"?", 8, 1) + struct.pack(">ll", 7, 2 ** 17)
+    assert np.allclose(gpmf.values(gpmf.parse_klv(mixed)[0], "lq"), [[7.0, 2.0]])
+
+
 def test_gps9_carries_fix_and_precision_per_sample():
     fixes = walk_north(4)
     fixes[1] = fixes[1][:3] + (0, 150)        # no fix

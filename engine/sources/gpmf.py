@@ -44,6 +44,8 @@ MIN_GOOD_FIXES = 2   # fewer good samples than this: no positions
 # type char -> numpy big-endian dtype
 _TYPES = {"b": ">i1", "B": ">u1", "c": "S1", "d": ">f8", "f": ">f4", "F": "S4", "j": ">i8", "J": ">u8",
           "l": ">i4", "L": ">u4", "q": ">i4", "Q": ">i8", "s": ">i2", "S": ">u2", "U": "S16"}
+# Fixed-point types (GPMF spec): q is Q15.16, Q is Q31.32; stored as integers, scaled here.
+_FIXED_POINT = {"q": 2.0 ** 16, "Q": 2.0 ** 32}
 
 
 @dataclass
@@ -99,11 +101,13 @@ def values(item: Klv, complex_type: str = "") -> np.ndarray:
         if dt.itemsize != item.size:
             raise InputError(f"GPMF: {item.key} TYPE {complex_type!r} is {dt.itemsize} bytes, samples {item.size}")
         rec = np.frombuffer(item.data, dtype=dt, count=item.repeat)
-        return np.stack([rec[name].astype(np.float64) for name in dt.names], axis=1)
+        return np.stack([rec[name].astype(np.float64) / _FIXED_POINT.get(c, 1.0)
+                         for name, c in zip(dt.names, complex_type)], axis=1)
     if item.size % dt.itemsize:
         raise InputError(f"GPMF: {item.key} sample of {item.size} bytes is not whole {item.type!r} values")
     per = item.size // dt.itemsize
-    return np.frombuffer(item.data, dtype=dt, count=per * item.repeat).astype(np.float64).reshape(item.repeat, per)
+    v = np.frombuffer(item.data, dtype=dt, count=per * item.repeat).astype(np.float64).reshape(item.repeat, per)
+    return v / _FIXED_POINT.get(item.type, 1.0)
 
 
 def _scaled(item: Klv, scal: Optional[Klv], complex_type: str = "") -> np.ndarray:
