@@ -79,6 +79,27 @@ def in_metres(f: StepFactors, metric: Metric, chain_starts: np.ndarray, params: 
     return out
 
 
+def keys_and_start(metric: Metric, keys: np.ndarray, dr: np.ndarray, f: StepFactors, chain_starts: np.ndarray,
+                   params: MapParams):
+    """(keys, dead reckoning, start, chain has GPS): the pose graph's key nodes with the GPS
+    nodes (``gps_nodes``: at most as many as the other keys, or ``MIN_GPS_KEYS``), the dead
+    reckoning ``dr`` on the fixes (``anchored``) and where the solver starts (``initial``)."""
+    budget = max(MIN_GPS_KEYS, keys.size)
+    keys = np.union1d(keys, gps_nodes(metric, f.dx, f.dy, chain_starts, params, dr.shape[0], budget))
+    dr, has_gps = anchored(dr, metric, chain_starts)
+    return keys.astype(np.int64), dr, initial(dr, metric, chain_starts, params), has_gps
+
+
+def positions(metric: Metric, keys: np.ndarray, params: MapParams) -> list:
+    """(node, (x, y) metres, sigma) of the GPS position factors: every key node with a fix,
+    sigma from its DOP (``gps_dop_sigma_m``) or ``gps_sigma_m``."""
+    if metric.gps is None:
+        return []
+    sigma = metric.gps_sigma(params.gps_sigma_m, params.gps_dop_sigma_m)
+    return [(int(k), np.asarray(metric.gps[k], np.float64), float(sigma[k]))
+            for k in keys[np.isfinite(metric.gps[keys]).all(axis=1)].tolist()]
+
+
 def gps_scale(f: StepFactors, gps: np.ndarray, chain_starts: np.ndarray, params: MapParams) -> np.ndarray:
     """Metres per node step of every image step. Each chain is cut into stretches of equal node
     steps, as many as make a median GPS distance of ``gps_scale_span_m`` over a stretch (cut

@@ -29,8 +29,8 @@ def matches(a, b, score, inliers=None, ratio=None, support=None, yaw=None, confi
 
 def test_one_loop_per_place_keeps_the_most_confident_of_a_cluster_and_separate_places():
     c = matches(a=[10, 11, 12, 50], b=[80, 81, 82, 120], score=[4, 6, 5, 4])
-    keep = one_per_place(c, radius=4)
-    assert keep.tolist() == [False, True, False, True]
+    owner = one_per_place(c, radius=4)
+    assert owner.tolist() == [1, 1, 1, 3]      # the set-aside pairs name the kept pair of their place
 
 
 def test_strong_geometry_makes_an_automatic_loop_and_weak_evidence_a_candidate():

@@ -67,7 +67,12 @@ def test_one_per_place_is_the_greedy_search():
     for confidence in (rng.normal(size=a.size), np.round(rng.normal(size=a.size))):   # ties too
         p = Pairs(a=a, b=b, cosine=np.zeros(a.size, np.float32), score=confidence, confidence=confidence)
         for r in (0, 1, 4, 9):
-            assert np.array_equal(one_per_place(p, r), _greedy(a, b, confidence, r))
+            owner = one_per_place(p, r)
+            kept = owner == np.arange(a.size)
+            assert np.array_equal(kept, _greedy(a, b, confidence, r))
+            # each pair set aside names a kept pair of its place, one at least as confident
+            assert kept[owner].all() and (np.abs(a[owner] - a) <= r).all() and (np.abs(b[owner] - b) <= r).all()
+            assert (confidence[owner] >= confidence).all()
 
 
 def test_sorted_unique_is_np_unique():

@@ -32,16 +32,17 @@ class PlaceGrid:
 
 
 def one_per_place(pairs: Pairs, radius: int) -> np.ndarray:
-    """Stage 3: a mask of the pairs kept: no more ``confident`` pair within ``radius`` nodes on
-    both ends (ties go to the earlier pair). Each kept pair marks the pairs near it (found among the
+    """Stage 3: each pair's place, as the index of the pair that stands for it: itself where no
+    more ``confident`` pair lies within ``radius`` nodes on both ends (ties go to the earlier
+    pair), else the first such pair kept. Each kept pair marks the pairs near it (found among the
     pairs sorted by ``a``): a search per pair took 11 s of the 72 s of benchmarks/bench_scale.py."""
     r = max(int(radius), 0)
-    keep, free = np.zeros(len(pairs), bool), np.ones(len(pairs), bool)   # free: near no kept pair
+    owner = np.full(len(pairs), -1, np.int64)   # -1: near no kept pair yet
     by_a = np.argsort(pairs.a, kind="stable")
     sorted_a = pairs.a[by_a]
     for i in np.lexsort((pairs.b, pairs.a, -pairs.confidence)).tolist():
-        if free[i]:
-            keep[i] = True
+        if owner[i] < 0:
             near = by_a[np.searchsorted(sorted_a, pairs.a[i] - r):np.searchsorted(sorted_a, pairs.a[i] + r, "right")]
-            free[near[np.abs(pairs.b[near] - pairs.b[i]) <= r]] = False
-    return keep
+            near = near[(np.abs(pairs.b[near] - pairs.b[i]) <= r) & (owner[near] < 0)]
+            owner[near] = i                     # i itself among them
+    return owner

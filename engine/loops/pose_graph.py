@@ -111,12 +111,8 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
                                      np.asarray(extra_keys, np.int64)])).astype(np.int64)
     dr = dead_reckoning(dx, dy, dt, m, chain_starts)
     start, has_gps = dr, np.zeros(chain_starts.size, bool)
-    if metric is not None:
-        budget = max(metric_factors.MIN_GPS_KEYS, keys.size)
-        keys = np.union1d(keys, metric_factors.gps_nodes(metric, dx, dy, chain_starts, params, m, budget))
-        keys = keys.astype(np.int64)
-        dr, has_gps = metric_factors.anchored(dr, metric, chain_starts)
-        start = metric_factors.initial(dr, metric, chain_starts, params)
+    if metric is not None:   # GPS key nodes; the path moved onto the fixes
+        keys, dr, start, has_gps = metric_factors.keys_and_start(metric, keys, dr, f, chain_starts, params)
 
     graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
     inliers: list[int] = []
@@ -157,11 +153,8 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
         st_loop = np.radians(params.loop_turn_sigma_deg) if np.isfinite(yaw) else _FREE_TURN
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([loop_sigma, loop_sigma, st_loop]))
         loop_factors.append(add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(0.0, 0.0, turn), noise), False))
-    if metric is not None and metric.gps is not None:   # position factors, heading free
-        sigma_gps = metric.gps_sigma(params.gps_sigma_m, params.gps_dop_sigma_m)
-        for k in keys[np.isfinite(metric.gps[keys]).all(axis=1)].tolist():
-            add(gtsam.PoseTranslationPrior2D(int(k), np.asarray(metric.gps[k], np.float64),
-                                             gtsam.noiseModel.Isotropic.Sigma(2, float(sigma_gps[k]))), True)
+    for k, xy, sigma in (metric_factors.positions(metric, keys, params) if metric is not None else ()):
+        add(gtsam.PoseTranslationPrior2D(k, xy, gtsam.noiseModel.Isotropic.Sigma(2, sigma)), True)   # heading free
 
     if loop_factors or robust_steps:
         base = gtsam.LevenbergMarquardtParams()
@@ -176,8 +169,7 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
     else:
         result = gtsam.LevenbergMarquardtOptimizer(graph, initial).optimize()
         weights = np.ones(graph.size())
-    solved = np.array([[result.atPose2(int(k)).x(), result.atPose2(int(k)).y(), result.atPose2(int(k)).theta()]
-                       for k in keys]).reshape(-1, 3)
+    solved = np.array([[p.x(), p.y(), p.theta()] for p in map(result.atPose2, keys.tolist())]).reshape(-1, 3)
     poses = _spread(dr, keys, solved, segments)
     kept = weights[np.asarray(loop_factors, np.int64)] > 0.5 if loop_factors else np.zeros(0, bool)
     outvoted = np.asarray(sorted(i for i, k in robust_steps.items() if weights[k] <= 0.5), np.int64)

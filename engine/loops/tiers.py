@@ -20,7 +20,7 @@ from ..params import MapParams
 from ..retrieval import temporal_neighbours
 from .pairs import Pairs, Status
 from .places import PlaceGrid
-from .retrieve import descriptor_rank, scored, with_support
+from .retrieve import background, scored, with_support
 
 
 def evidence(pairs: Pairs, params: MapParams, count_steps: bool = True,
@@ -86,46 +86,23 @@ def _beside(pairs: Pairs, owners: np.ndarray, half: int):
     return (pairs.a[owners, None] + da).ravel(), (pairs.b[owners, None] + db).ravel(), np.repeat(owners, da.size)
 
 
-def _set_aside_for(pairs: Pairs, todo: np.ndarray, set_aside: Pairs, radius: int):
-    """(a, b, owner) of the pairs stage 3 set aside for a pair in ``todo``: the kept pair within
-    ``radius`` it ranked first owns it, where that owner is in ``todo``."""
-    empty = np.zeros(0, np.int64)
-    if len(set_aside) == 0 or todo.size == 0:
-        return empty, empty, empty
-    rank = descriptor_rank(pairs)
-    kept = PlaceGrid(radius)
-    for i in range(len(pairs)):
-        kept.add(int(pairs.a[i]), int(pairs.b[i]), i)
-    in_todo = np.zeros(len(pairs), bool)
-    in_todo[todo] = True
-    out = []
-    for sa, sb in zip(set_aside.a.tolist(), set_aside.b.tolist()):
-        near = kept.near(sa, sb)
-        if near:
-            first = min(near, key=lambda i: (-rank[i], int(pairs.a[i]), int(pairs.b[i])))
-            if in_todo[first]:
-                out.append((sa, sb, first))
-    if not out:
-        return empty, empty, empty
-    return tuple(np.asarray(x, np.int64) for x in zip(*out))
-
-
-def nearest(pairs: Pairs, status: np.ndarray, rule: np.ndarray, set_aside: Pairs, vectors: np.ndarray,
+def nearest(pairs: Pairs, status: np.ndarray, rule: np.ndarray, set_aside: tuple, vectors: np.ndarray,
             recording: np.ndarray, geometry, params: MapParams, cache: dict):
     """Stage 6: each pair not automatic moves to the pair of its place whose views measure
     closest, among those that pass stage 5 by the measured distance alone; it then is that
     pair (status auto, rule "nearest pair of the place"). The pairs of its place: those stage
     3 set aside for it and, for a pair with ``auto_inliers``, every pair up to
     ``place_radius // 2`` nodes beside it. A pair does not move into a place that already has
-    an automatic loop. Returns (pairs, status, rule), new arrays."""
-    from .retrieve import background
-
+    an automatic loop. ``set_aside``: stage 3's pairs set aside and the index of the kept pair
+    of each one's place. Returns (pairs, status, rule), new arrays."""
     m = geometry.node_rows.size
     todo = np.flatnonzero(status != Status.AUTO.value)
     if not geometry.known or todo.size == 0:
         return pairs, status, rule
     na, nb, owner = _beside(pairs, todo[pairs.inliers[todo] >= params.auto_inliers], params.place_radius // 2)
-    sa, sb, so = _set_aside_for(pairs, todo, set_aside, params.place_radius)
+    aside_pairs, aside_owner = set_aside
+    mine = np.isin(aside_owner, todo)
+    sa, sb, so = aside_pairs.a[mine], aside_pairs.b[mine], aside_owner[mine]
     stacked = np.stack([np.concatenate([owner, so]), np.concatenate([na, sa]), np.concatenate([nb, sb])], axis=1)
     aside = np.concatenate([np.zeros(owner.size, bool), np.ones(so.size, bool)])
     _, first = np.unique(stacked, axis=0, return_index=True)

@@ -65,8 +65,10 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
     floor = params.candidate_z - params.geometry_margin_z
     pairs = pairs.take((pairs.score >= floor) | (np.nan_to_num(pairs.support, nan=-np.inf) >= floor))
     pairs.confidence = descriptor_rank(pairs)
-    kept = one_per_place(pairs, params.place_radius)                                 # 3
-    set_aside, pairs = pairs.take(~kept), pairs.take(kept)
+    owner = one_per_place(pairs, params.place_radius)                                # 3
+    kept = owner == np.arange(len(pairs))
+    set_aside = (pairs.take(~kept), (np.cumsum(kept) - 1)[owner[~kept]])   # and the kept pair of its place
+    pairs = pairs.take(kept)
     pairs = geometry.measure(pairs, params)                                         # 4
     status, rule = tiers(pairs, params, recording=recording)                        # 5
     pairs, status, rule = nearest(pairs, status, rule, set_aside, v, recording, geometry, params, cache)   # 6
