@@ -18,9 +18,19 @@ FAST = ["--input-height", "64", "-q"]  # a small descriptor input keeps the suit
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
+    """The first 30 s of the route, in every format: what the format, option and cache tests need
+    (every frame of it is described, once per test; the whole route is ``full_recording``)."""
     out = tmp_path_factory.mktemp("rec")
-    rec = make_recording("reverse", look="indoor", seed=3, width=256, height=128, fps=2.0)
+    rec = make_recording("reverse", look="indoor", seed=3, width=256, height=128, fps=2.0, max_frames=60)
     return rec, write_recording(rec, out)
+
+
+@pytest.fixture(scope="module")
+def full_recording(tmp_path_factory):
+    """The whole ``reverse`` route (it comes back along the corridor), as a video and its poses."""
+    out = tmp_path_factory.mktemp("full")
+    rec = make_recording("reverse", look="indoor", seed=3, width=256, height=128, fps=2.0)
+    return rec, write_recording(rec, out, formats=("video", "poses"))
 
 
 @pytest.fixture()
@@ -205,8 +215,8 @@ def test_no_shift_descriptors_have_zero_shifts(recording, tmp_path, cache_dir, c
         assert not z["shifts"].any()
 
 
-def test_map_with_poses_then_eval_json(recording, tmp_path, cache_dir, capsys):
-    rec, files = recording
+def test_map_with_poses_then_eval_json(full_recording, tmp_path, cache_dir, capsys):
+    rec, files = full_recording
     out, plot = tmp_path / "m.graphml", tmp_path / "m.png"
     code, _, err = run_cli(capsys, "map", files["video"], "-o", out, "--poses", files["poses"],
                            "--plot", plot, "--method", "shift-simple", *FAST, *cache_dir)
