@@ -124,19 +124,16 @@ def _write_graphml(g: nx.Graph, f) -> None:
     out = io.TextIOWrapper(f, encoding="utf-8", errors="xmlcharrefreplace", newline="\n")
     w = out.write
 
-    def data(pad: str, values: dict, scope: str) -> None:
+    def data(pad: str, values: dict, scope: str) -> str:
+        lines = []
         for k, v in values.items():
-            key = keys[(str(k), _XML_TYPES[type(v)], scope)]
             text = v.translate(_XML_TEXT) if type(v) is str else str(v)
-            w(f'{pad}<data key="{key}">{text}</data>\n' if text else f'{pad}<data key="{key}" />\n')
+            key = keys[str(k), _XML_TYPES[type(v)], scope]
+            lines.append(f'{pad}<data key="{key}">{text}</data>\n' if text else f'{pad}<data key="{key}" />\n')
+        return "".join(lines)
 
-    def element(pad: str, head: str, tag: str, values: dict, scope: str) -> None:
-        if not values:
-            w(f"{pad}<{head} />\n")
-            return
-        w(f"{pad}<{head}>\n")
-        data(pad + "  ", values, scope)
-        w(f"{pad}</{tag}>\n")
+    def element(pad: str, head: str, tag: str, values: dict, scope: str) -> str:
+        return f"{pad}<{head}>\n{data(pad + '  ', values, scope)}{pad}</{tag}>\n" if values else f"{pad}<{head} />\n"
 
     w("<?xml version='1.0' encoding='utf-8'?>\n<graphml xmlns=\"http://graphml.graphdrawing.org/xmlns\" "
       "xmlns:xsi=\"http://www.w3.org/2001/XMLSchema-instance\" xsi:schemaLocation=\"http://graphml.graphdrawing."
@@ -145,15 +142,15 @@ def _write_graphml(g: nx.Graph, f) -> None:
         w(f'  <key id="{key}" for="{scope}" attr.name="{name.translate(_XML_ATTR)}" attr.type="{kind}" />\n')
     head = 'graph edgedefault="undirected"' + ("" if gid is None else f' id="{str(gid).translate(_XML_ATTR)}"')
     if g.number_of_nodes() == 0:
-        element("  ", head, "graph", graph, "graph")
+        w(element("  ", head, "graph", graph, "graph"))
     else:   # the graph's own data come after its nodes and edges
         w(f"  <{head}>\n")
         for n, d in g.nodes(data=True):
-            element("    ", f'node id="{str(n).translate(_XML_ATTR)}"', "node", d, "node")
+            w(element("    ", f'node id="{str(n).translate(_XML_ATTR)}"', "node", d, "node"))
         for u, v, d in g.edges(data=True):
-            element("    ", f'edge source="{str(u).translate(_XML_ATTR)}" target="{str(v).translate(_XML_ATTR)}"',
-                    "edge", d, "edge")
-        data("    ", graph, "graph")
+            w(element("    ", f'edge source="{str(u).translate(_XML_ATTR)}" target="{str(v).translate(_XML_ATTR)}"',
+                      "edge", d, "edge"))
+        w(data("    ", graph, "graph"))
         w("  </graph>\n")
     w("</graphml>\n")
     out.flush()
