@@ -4,12 +4,18 @@ A real subprocess (tests/journal_writer.py) journals a decision every 20 ms and 
 ``ack n`` once each is written; it is killed with SIGKILL at a random moment, 20 times
 in a row (each new process continues the same journal). Every acknowledged decision
 must be replayed, in order, and nothing is replayed twice. The one-decision-per-second
-version is ``benchmarks/kill_test.py``.
+version is ``benchmarks/kill_test.py`` (a fresh interpreter per process: ``run_and_kill``).
+
+Here each of the 20 processes is forked from one that has already imported the writer
+(tests/fork_runner.py): a process of its own, opening the journal itself and killed with
+SIGKILL like a fresh one, without a second or two of imports each.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import queue
 import random
 import signal
 import subprocess
@@ -51,12 +57,70 @@ def run_and_kill(session: Path, period: float, lifetime: float, writer: Path = W
     return acks
 
 
+class Forks:
+    """tests/fork_runner.py for ``writer``: ``run_and_kill`` as above, in forked processes."""
+
+    def __init__(self, writer: Path, log: Path):
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        self.log = log
+        self._err = open(log, "w")
+        self.proc = subprocess.Popen([sys.executable, str(WRITER.parent / "fork_runner.py"), str(writer)],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._err,
+                                     text=True, env=env)
+        self.lines: queue.Queue = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+        assert self._next(60) == "loaded", self.log.read_text()[-2000:]
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.put(line.strip())
+        self.lines.put(None)
+
+    def _next(self, timeout: float):
+        try:
+            line = self.lines.get(timeout=timeout)
+        except queue.Empty:
+            line = None
+        assert line is not None, f"the fork runner stopped: {self.log.read_text()[-2000:]}"
+        return line
+
+    def run_and_kill(self, session: Path, period: float, lifetime: float) -> list[int]:
+        self.proc.stdin.write(json.dumps([str(session), str(period)]) + "\n")
+        self.proc.stdin.flush()
+        first = self._next(30)
+        assert first.startswith("pid "), first
+        pid = int(first.split()[1])
+        acks: list[int] = []
+        line = self._next(30)
+        assert line == "ready", f"the writer did not start: {line} {self.log.read_text()[-2000:]}"
+        time.sleep(lifetime)
+        os.kill(pid, signal.SIGKILL)
+        while not (line := self._next(10)).startswith("exit "):
+            assert line.startswith("ack "), line
+            acks.append(int(line.split()[1]))
+        assert line == f"exit {pid} {-signal.SIGKILL}", (line, self.log.read_text()[-2000:])
+        return acks
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(10)
+        self._err.close()
+
+
 def test_twenty_random_kills_lose_no_decision(tmp_path):
     session = tmp_path / "walk.mp4.panotopo.json"
     rng = random.Random()  # random moments on purpose: any moment must be safe
     acked: list[int] = []
-    for _ in range(20):
-        acked += run_and_kill(session, period=0.02, lifetime=rng.uniform(0.03, 0.2))
+    forks = Forks(WRITER, tmp_path / "writer.log")
+    try:
+        for _ in range(20):
+            acked += forks.run_and_kill(session, period=0.02, lifetime=rng.uniform(0.03, 0.2))
+    finally:
+        forks.close()
     journal = Journal.open(session)
     try:
         replayed = [r["decision"] for r in journal.replay()]
@@ -77,9 +141,12 @@ def test_twenty_random_kills_of_the_app_model_lose_no_decision(tmp_path):
     session = tmp_path / "walk.mp4.panotopo.json"
     rng = random.Random()
     acked: list[int] = []
-    for _ in range(20):
-        acked += run_and_kill(session, period=0.02, lifetime=rng.uniform(0.05, 0.3),
-                              writer=WRITER.parent / "app_decider.py")
+    forks = Forks(WRITER.parent / "app_decider.py", tmp_path / "decider.log")
+    try:
+        for _ in range(20):
+            acked += forks.run_and_kill(session, period=0.02, lifetime=rng.uniform(0.05, 0.3))
+    finally:
+        forks.close()
     journal = Journal.open(session)
     try:
         decisions = records.replay(journal.replay())
