@@ -36,6 +36,24 @@ def recording(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
+def short_video_file(tmp_path_factory):
+    """The first 20 s of the route as a video: for the tests that describe it with options of
+    their own (nothing shared with the other tests' cache), where no loop is needed."""
+    from engine.synth import make_recording, write_recording
+
+    rec = make_recording(route="loop", look="indoor", width=256, height=128, fps=2.0, max_frames=40)
+    return write_recording(rec, tmp_path_factory.mktemp("short"), formats=("video",))["video"]
+
+
+@pytest.fixture
+def short_video(short_video_file, tmp_path) -> Path:
+    """A copy of it in this test's folder (its sessions stay there)."""
+    import shutil
+
+    return Path(shutil.copy(short_video_file, tmp_path / Path(short_video_file).name))
+
+
+@pytest.fixture(scope="module")
 def cache_root(tmp_path_factory):
     return str(tmp_path_factory.mktemp("cache"))
 
@@ -278,7 +296,7 @@ def _photometric(descs) -> str:
     return descs.meta["settings"].get("photometric", "none")
 
 
-def test_the_method_decides_the_describe_options_in_the_app(qtbot, make_window, recording, tmp_path, dialogs):
+def test_the_method_decides_the_describe_options_in_the_app(qtbot, make_window, short_video, tmp_path, dialogs):
     """verified's descriptors are standardised: switching to ours describes again, plainly (not
     a bare remap), and back; a verified parameter only remaps. A descriptors file is what it
     is: either method maps it, only a method needing another shift is refused."""
@@ -287,7 +305,7 @@ def test_the_method_decides_the_describe_options_in_the_app(qtbot, make_window, 
     runs: list = []
     w.runner.started.connect(lambda: runs.append(panel.method.currentData()))
     panel.method.setCurrentIndex(panel.method.findData("verified"))
-    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    open_and_run(qtbot, w, short_video)
     assert _photometric(w.doc.descs) == "standardise"
     assert "photometric" not in w.doc.describe_settings.options      # the user's own settings stay plain
     for method, expected in (("ours", "none"), ("verified", "standardise")):
@@ -685,7 +703,7 @@ def test_failed_run_keeps_map_and_decisions(qtbot, make_window, recording, tmp_p
     assert not w.runner.running and w.isWindowModified()
 
 
-def test_the_panel_photometric_choice_wins_over_the_method_and_is_saved(qtbot, make_window, recording, tmp_path):
+def test_the_panel_photometric_choice_wins_over_the_method_and_is_saved(qtbot, make_window, short_video, tmp_path):
     """The Descriptors group's Photometric row: a named choice is the user's (kept in the
     session, used whatever the method); "as the method asks" leaves it to the method again.
     The row is there only for a descriptor that has the option."""
@@ -694,7 +712,7 @@ def test_the_panel_photometric_choice_wins_over_the_method_and_is_saved(qtbot, m
     panel.method.setCurrentIndex(panel.method.findData("verified"))
     assert panel.photometric.isVisibleTo(panel) and panel.photometric_choice() is None
     panel.photometric.setCurrentIndex(panel.photometric.findData("none"))
-    open_and_run(qtbot, w, copy_recording(recording, tmp_path))
+    open_and_run(qtbot, w, short_video)
     assert _photometric(w.doc.descs) == "none"                       # not what verified asks
     assert w.current_session().describe["options"]["photometric"] == "none"
     assert panel.photometric_choice() == "none"
