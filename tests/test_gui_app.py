@@ -35,9 +35,18 @@ def descriptors_file(tmp_path_factory):
     return npz
 
 
-def test_screenshot_of_a_descriptors_file(descriptors_file, tmp_path):
-    png = tmp_path / "window.png"
-    proc = _run([descriptors_file, png], tmp_path)
+@pytest.fixture(scope="module")
+def screenshot(descriptors_file, tmp_path_factory):
+    """One screenshot run of the descriptors file (its own config and cache folders); the tests
+    below read what it left, and change nothing."""
+    tmp = tmp_path_factory.mktemp("shot")
+    png = tmp / "window.png"
+    proc = _run([descriptors_file, png], tmp)
+    return proc, png, tmp / "config"
+
+
+def test_screenshot_of_a_descriptors_file(screenshot):
+    proc, png, _ = screenshot
     assert proc.returncode == 0, proc.stderr[-2000:]
     from PySide6.QtGui import QImage
 
@@ -62,9 +71,9 @@ def test_bad_input_exits_non_zero_with_one_line(tmp_path, name, content):
     assert not png.exists()
 
 
-def test_screenshot_leaves_the_recent_files_list_alone(descriptors_file, tmp_path):
+def test_screenshot_leaves_the_recent_files_list_alone(screenshot, descriptors_file):
     """Finding 16 of issue 16: a screenshot run is not the user opening a file."""
-    proc = _run([descriptors_file, tmp_path / "window.png"], tmp_path)
+    proc, _, config = screenshot
     assert proc.returncode == 0, proc.stderr[-2000:]
-    written = "".join(p.read_text(errors="replace") for p in (tmp_path / "config").rglob("*") if p.is_file())
+    written = "".join(p.read_text(errors="replace") for p in config.rglob("*") if p.is_file())
     assert "recent" not in written and str(descriptors_file) not in written
