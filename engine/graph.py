@@ -110,10 +110,14 @@ def _write_graphml(g: nx.Graph, f) -> None:
     does, streamed. Without lxml networkx builds an ElementTree of the whole map first: 100k
     nodes and 35k loops took 50 of the map's 270 s under cProfile, and the tree's memory
     (benchmarks/bench_scale.py)."""
-    graph = {k: v for k, v in g.graph.items() if k not in _NETWORKX_KEYS}
+    def plain(d: dict) -> dict:   # a numpy number or a bool set by hand: as _plain stores it
+        return d if all(type(v) in _XML_TYPES for v in d.values()) else {k: _plain(v) for k, v in d.items()}
+
+    graph = plain({k: v for k, v in g.graph.items() if k not in _NETWORKX_KEYS})
     gid = graph.pop("id", None)   # networkx writes a graph attribute "id" as the graph's own id
-    scopes = (("graph", [graph]), ("node", [d for _, d in g.nodes(data=True)]),
-              ("edge", [d for _, _, d in g.edges(data=True)]))
+    nodes = [(n, plain(d)) for n, d in g.nodes(data=True)]
+    edges = [(u, v, plain(d)) for u, v, d in g.edges(data=True)]
+    scopes = (("graph", [graph]), ("node", [d for _, d in nodes]), ("edge", [d for _, _, d in edges]))
     keys = {}   # (name, type, scope) -> key id, numbered in the order networkx meets them
     for scope, dicts in scopes:
         for d in dicts:
@@ -145,9 +149,9 @@ def _write_graphml(g: nx.Graph, f) -> None:
         w(element("  ", head, "graph", graph, "graph"))
     else:   # the graph's own data come after its nodes and edges
         w(f"  <{head}>\n")
-        for n, d in g.nodes(data=True):
+        for n, d in nodes:
             w(element("    ", f'node id="{str(n).translate(_XML_ATTR)}"', "node", d, "node"))
-        for u, v, d in g.edges(data=True):
+        for u, v, d in edges:
             w(element("    ", f'edge source="{str(u).translate(_XML_ATTR)}" target="{str(v).translate(_XML_ATTR)}"',
                       "edge", d, "edge"))
         w(data("    ", graph, "graph"))

@@ -105,3 +105,16 @@ def test_support_is_the_per_pair_mean_and_the_cache_gives_the_same():
     assert np.array_equal(again.support, fresh.support, equal_nan=True)
     assert np.array_equal(again.direction, fresh.direction)
     assert np.array_equal(first.support, fresh.support[::2], equal_nan=True)
+
+
+def test_a_numpy_number_or_a_bool_on_the_map_is_written_as_its_plain_value(tmp_path):
+    """Values set by hand as numpy numbers or bools are stored as the plain values the GraphML
+    contract names (int, float; bools as 0/1), never an export that fails."""
+    g = nx.Graph(generator="x", flag=True)
+    g.add_node("n0", index=np.int64(3), x=np.float32(1.5))
+    g.add_edge("n0", "n0", similarity=np.float64(0.25))
+    f = io.BytesIO()
+    _write_graphml(g, f)
+    back = nx.read_graphml(io.BytesIO(f.getvalue()))
+    assert back.graph["flag"] == 1 and back.nodes["n0"] == {"index": 3, "x": 1.5}
+    assert back.edges["n0", "n0"]["similarity"] == 0.25
