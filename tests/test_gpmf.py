@@ -100,6 +100,21 @@ def test_a_damaged_payload_is_one_clear_line(cut):
     assert "GPMF" in str(err.value) and "\n" not in str(err.value)
 
 
+def test_a_compressed_gyro_stream_does_not_stop_the_gps_but_a_compressed_gps_stream_is_one_line():
+    """Mapping never uses the gyroscope: a stream of it the reader cannot decode (GPMF's
+    compressed type "#") is left out, and the GPS beside it read; GPS it cannot decode is a
+    clear one-line error, never a map without the positions the file has."""
+    payload = clips.gpmf_payload(walk_north(5))
+    gyro = clips.nest("STRM", clips.klv("GYRO", "#", 4, 3, b"\x01\x02\x03\x04" * 3))
+    body = gpmf.parse_klv(payload)[0].data + gyro
+    tel = samples(clips.klv("DEVC", "", 1, len(body), body))
+    assert tel.gps.shape == (5, 3)
+    bad = clips.nest("DEVC", clips.nest("STRM", clips.klv("GPS5", "#", 4, 5, b"\0" * 20)))
+    with pytest.raises(InputError) as err:
+        samples(bad)
+    assert "GPS5" in str(err.value) and "\n" not in str(err.value)
+
+
 @pytest.fixture(scope="module")
 def gopro_clip(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("gpmf")

@@ -150,6 +150,8 @@ def payload_samples(payload: bytes, t0: float, duration: float, out: dict) -> No
             for item in strm.children:
                 if item.key not in ("GPS5", "GPS9", "GPRI", "CORI", "GYRO") or item.repeat == 0:
                     continue
+                if item.key == "GYRO" and item.type not in _TYPES:   # e.g. compressed ("#"): mapping
+                    continue                                         # never uses it, so no reason to refuse
                 v = _scaled(item, scal, ctype)
                 t = t0 + np.arange(item.repeat) * (duration / item.repeat)
                 if item.key == "GPRI":   # time, lat, lon, alt, HDOP, VDOP, speed, course, fix, satellites
