@@ -21,7 +21,7 @@ unless asked), atomically (``engine.outputs.write_atomically``).
   ``EDGE_SE2 i j dx dy dtheta I11 I12 I13 I22 I23 I33``: the relative pose of j in i's frame
   and the upper triangle of its information matrix (inverse covariance), row by row. Edges:
   every sequential arc (i, i + 1) with the step the pose graph used
-  (``engine.loops.pose_graph.step_measurements``: the two-view step, or the direction
+  (``engine.loops.pose_graph.step_factors``: the two-view step, or the direction
   carried on where a step had none), then every loop arc the corrected map holds (auto,
   confirmed, manual; candidates and rejected ones with ``keep_candidates`` /
   ``keep_rejected``) as the pose graph's loop factor: no translation (sigma

@@ -176,7 +176,7 @@ class TopoMap:
         self.node_rows = node_rows          # rows of the Descriptors that are nodes
         self.node_vectors = node_vectors    # (m, d) descriptors of the nodes, when known
         self.unapplied: dict[str, list] = {"loops": [], "manual": [], "labels": []}
-        # The pose graph's step measurements (engine.loops.pose_graph.step_measurements:
+        # The pose graph's step measurements (engine.loops.pose_graph.step_factors:
         # dx, dy, dtheta, sigma_xy, sigma_theta per consecutive node pair), in memory only,
         # for the g2o export; None when the map was read from a file or had no geometry.
         self.step_measurements = None
