@@ -22,7 +22,7 @@ import numpy as np
 
 from .metric import Metric
 from .params import MapParams
-from .planar import apply, dead_reckoning, relative, rigid_fit, similarity_scale
+from .planar import apply, chains, dead_reckoning, relative, rigid_fit, similarity_scale
 
 # GPS factors at nodes that are not otherwise key nodes make the graph larger, and every
 # graduated step solves it whole: at most this many, or as many as it has other key nodes.
@@ -112,7 +112,7 @@ def gps_scale(f: StepFactors, gps: np.ndarray, chain_starts: np.ndarray, params:
     scale = np.ones(f.dx.size)
     dr = dead_reckoning(f.dx, f.dy, f.dt, m, chain_starts)
     have = np.isfinite(gps).all(axis=1)
-    for s, e in _chains(chain_starts, m):
+    for s, e in chains(chain_starts, m):
         g = s + np.flatnonzero(have[s:e])
         if g.size < 2:
             continue
@@ -157,7 +157,7 @@ def gps_nodes(metric: Metric, dx, dy, chain_starts: np.ndarray, params: MapParam
     length = np.hypot(dx, dy)
     crossing = chain_starts[chain_starts > 0] - 1
     spacing = max(params.gps_spacing_m, (float(length.sum()) - float(length[crossing].sum())) / max(budget, 1))
-    for s, e in _chains(chain_starts, m):
+    for s, e in chains(chain_starts, m):
         along = np.concatenate([[0.0], np.cumsum(length[s:e - 1])])
         g = np.flatnonzero(have[s:e])
         if g.size == 0:
@@ -176,7 +176,7 @@ def anchored(dr: np.ndarray, metric: Metric, chain_starts: np.ndarray):
     has_gps = np.zeros(chain_starts.size, bool)
     m = dr.shape[0]
     have = np.isfinite(metric.gps).all(axis=1) if metric.gps is not None else np.zeros(m, bool)
-    for c, (s, e) in enumerate(_chains(chain_starts, m)):
+    for c, (s, e) in enumerate(chains(chain_starts, m)):
         g = s + np.flatnonzero(have[s:e])
         if g.size:
             has_gps[c] = True
@@ -197,7 +197,7 @@ def initial(dr: np.ndarray, metric: Metric, chain_starts: np.ndarray, params: Ma
         return dr
     out = dr.copy()
     have = np.isfinite(metric.gps).all(axis=1)
-    for s, e in _chains(chain_starts, dr.shape[0]):
+    for s, e in chains(chain_starts, dr.shape[0]):
         g = s + np.flatnonzero(have[s:e])
         if g.size < 2:
             continue
@@ -211,9 +211,3 @@ def initial(dr: np.ndarray, metric: Metric, chain_starts: np.ndarray, params: Ma
             out[a:b, :2] = dr[a:b, :2] @ rot.T + shift
             out[a:b, 2] = dr[a:b, 2] + turn
     return out
-
-
-def _chains(chain_starts: np.ndarray, m: int):
-    """(first, end) of every chain of ``m`` nodes."""
-    bounds = list(chain_starts) + [m]
-    return list(zip(bounds[:-1], bounds[1:]))

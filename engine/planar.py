@@ -41,11 +41,16 @@ def compose(dx, dy, dt, sxy, st):
     return (x, y, th), cov
 
 
+def chains(chain_starts, m: int) -> list[tuple[int, int]]:
+    """(first, end) of every chain of ``m`` nodes, from the first node of each."""
+    bounds = [int(s) for s in chain_starts] + [m]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
 def dead_reckoning(dx, dy, dt, m: int, chain_starts) -> np.ndarray:
     """(m, 3) poses summed along each chain of steps from its first node (at the origin)."""
     poses = np.zeros((m, 3))
-    bounds = list(chain_starts) + [m]
-    for s, e in zip(bounds[:-1], bounds[1:]):
+    for s, e in chains(chain_starts, m):
         th = np.concatenate([[0.0], np.cumsum(dt[s:e - 1])])
         wx = np.cos(th[:-1]) * dx[s:e - 1] - np.sin(th[:-1]) * dy[s:e - 1]
         wy = np.sin(th[:-1]) * dx[s:e - 1] + np.cos(th[:-1]) * dy[s:e - 1]

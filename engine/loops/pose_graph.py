@@ -28,7 +28,7 @@ from .. import metric_factors
 from ..metric_factors import StepFactors
 from ..params import MapParams
 from ..planar import apply, compose, dead_reckoning, relative
-from .pairs import Steps
+from .pairs import Steps, recording_of
 
 if TYPE_CHECKING:
     from ..metric import Metric
@@ -105,7 +105,7 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
     metric = None if metric is None or metric.empty else metric
     f = step_factors(steps, chain_starts, params, metric)
     dx, dy, dt, sxy, st, amb = f.dx, f.dy, f.dt, f.sigma_xy, f.sigma_t, f.ambiguous
-    chain_of = np.searchsorted(chain_starts, np.arange(m), side="right") - 1
+    chain_of = recording_of(m, chain_starts)
     keys = np.unique(np.concatenate([chain_starts, chain_starts[1:] - 1, [m - 1], loops.a, loops.b,
                                      np.flatnonzero(amb), np.flatnonzero(amb) + 1,
                                      np.asarray(extra_keys, np.int64)])).astype(np.int64)
