@@ -28,8 +28,9 @@ Figures (all from node positions on the ground truth, one world frame for both d
 - loops across the days: *right* within 1 m, *between* 1-2 m (neither right nor false: the
   two views may well show the same place), *false* beyond 2 m; and the review queue's
   candidates across the days (false: beyond 2 m);
-- within each recording, alone and in the site: revisits found and false loops as
-  ``engine.evaluate`` counts them (temporal neighbours: 5 nodes, as ``bench_families``);
+- within each recording, alone and in the site: revisits found and loops in ``engine.evaluate``'s
+  band (false beyond 2 m or between temporal neighbours, 5 nodes as ``bench_families``; 1-2 m
+  apart counted apart, neither right nor false);
 - joined: whether the site's automatic loops join the two recordings at all.
 
 One row per run (totals) goes to ``benchmarks/results/runs.csv`` through ``runs.append_run``
@@ -284,7 +285,8 @@ def positions(view: MapView, poses: list[Poses]) -> tuple[np.ndarray, np.ndarray
 
 
 def score_within(view: MapView, poses: list[Poses], s: int) -> dict:
-    """Revisits found and false loops within session ``s`` (``engine.evaluate``'s rules)."""
+    """Revisits found and loops within session ``s`` (``engine.evaluate``'s band: a loop of no
+    revisit is false beyond 2 m or between temporal neighbours, else 1-2 m apart, "between")."""
     x, y = positions(view, poses)
     rows = np.flatnonzero(view.session == s)
     xs, ys = x[rows], y[rows]
@@ -294,7 +296,7 @@ def score_within(view: MapView, poses: list[Poses], s: int) -> dict:
     label = _groups(ii, jj)
     rank = {int(r): k for k, r in enumerate(rows)}
     pair_event = {(int(a), int(b)): int(g) for a, b, g in zip(ii, jj, label)}
-    found, fp = set(), 0
+    found, fp, between = set(), 0, 0
     for a, b, status in view.loops:
         if a not in rank or b not in rank or status not in FOUND:
             continue
@@ -303,9 +305,11 @@ def score_within(view: MapView, poses: list[Poses], s: int) -> dict:
             continue
         if (i, j) in pair_event:
             found.add(pair_event[(i, j)])
+        elif j - i > EVAL_NN and loop_band(float(np.sqrt(d2[i, j])), RIGHT_M, FALSE_M) is LoopBand.DONT_CARE:
+            between += 1
         else:
             fp += 1
-    return {"nodes": m, "places": int(np.unique(label).size), "found": len(found), "false": fp}
+    return {"nodes": m, "places": int(np.unique(label).size), "found": len(found), "false": fp, "between": between}
 
 
 def score_across(view: MapView, poses: list[Poses]) -> dict:
@@ -392,16 +396,16 @@ def totals(rows: list[dict]) -> dict:
     t = {"pairs": len(rows), "mapped": 0, "shared": 0, "found": 0, "with_queue": 0, "right": 0, "between": 0,
          "false_across": 0, "queue": 0, "queue_false": 0, "joined": 0}
     for key in ("alone", "site"):
-        t[key] = {"places": 0, "found": 0, "false": 0}
+        t[key] = {"places": 0, "found": 0, "false": 0, "between": 0}
     for r in rows:
         if r["site"] is None:
             continue
         t["mapped"] += 1
         for w in r["alone"]:
-            for k in ("places", "found", "false"):
+            for k in ("places", "found", "false", "between"):
                 t["alone"][k] += w[k]
         for w in r["site"]["within"]:
-            for k in ("places", "found", "false"):
+            for k in ("places", "found", "false", "between"):
                 t["site"][k] += w[k]
         x = r["site"]["across"]
         t["shared"] += x["shared"]
@@ -422,7 +426,8 @@ def summary(t: dict) -> str:
             f"(with the queue {t['with_queue']}), loops across the days right {t['right']}, 1-2 m {t['between']}, "
             f"false {t['false_across']}; queue across {t['queue']} ({t['queue_false']} false); joined "
             f"{t['joined']}/{t['mapped']}. Within the recordings: alone {a['found']}/{a['places']} revisits, "
-            f"{a['false']} false loops; in the site {s['found']}/{s['places']}, {s['false']} false loops.")
+            f"{a['false']} false loops ({a['between']} 1-2 m); in the site {s['found']}/{s['places']}, "
+            f"{s['false']} false loops ({s['between']} 1-2 m).")
 
 
 def record(t: dict, family: str, seeds, method: str, note: str) -> None:
@@ -431,8 +436,8 @@ def record(t: dict, family: str, seeds, method: str, note: str) -> None:
     a, s = t["alone"], t["site"]
     notes = (f"bench_sessions.py: two days of one world mapped as one site ({t['mapped']}/{t['pairs']} pairs); "
              f"loops across 1-2 m {t['between']}, beyond 2 m {t['false_across']}; within the recordings alone "
-             f"{a['found']}/{a['places']} revisits {a['false']} false, in the site {s['found']}/{s['places']} "
-             f"{s['false']} false; joined {t['joined']}/{t['mapped']}")
+             f"{a['found']}/{a['places']} revisits {a['false']} false ({a['between']} 1-2 m), in the site "
+             f"{s['found']}/{s['places']} {s['false']} false ({s['between']} 1-2 m); joined {t['joined']}/{t['mapped']}")
     append_run({"family": family, "seeds": seeds, "method": method, "runs": 2 * t["mapped"],
                 "places": t["shared"], "places_found": t["found"],
                 "false_loops": t["false_across"] + s["false"], "with_queue": t["with_queue"],

@@ -190,6 +190,22 @@ def test_a_candidate_the_solved_map_closes_becomes_automatic_and_one_it_puts_apa
     assert closure[1] <= P.auto_distance_steps
 
 
+def test_a_pair_under_the_review_score_the_solved_map_closes_becomes_automatic():
+    """Stage 5 drops a pair whose descriptors score under ``candidate_z`` (a junction seen from
+    another side); the map measures it all the same: closed where the map puts its ends together,
+    still dropped where the map puts them apart."""
+    from engine.loops.verified import consistent
+
+    m = 81
+    low = P.candidate_z - 0.5
+    c = matches([0, 4, 15], [40, 44, 65], score=[6.0, low, low], inliers=[60, 30, 30], step=[40, 40, 40],
+                yaw=[0.0, 0.0, 0.0])
+    status = np.array(["auto", "", ""], dtype=object)      # "": dropped (Status.DROPPED)
+    out, _, closure, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert out[1] == "auto" and rule[1] == "the map closes it" and closure[1] <= P.auto_distance_steps
+    assert out[2] == ""
+
+
 def test_the_map_does_not_close_a_candidate_whose_views_share_too_little():
     from engine.loops.verified import consistent
 

@@ -10,8 +10,8 @@ the next, and every number it reads is a ``MapParams`` entry (``engine.params.PA
 5. ``tiers.tiers``           auto / candidate / dropped by a table of rules  -> statuses
 6. ``tiers.nearest``         a pair not automatic moves to its place's closest views
 7. ``pose_graph.solve``      consistency: a robust pose graph of steps and automatic loops;
-                             the loops it rejects go to the queue with the reason, candidates
-                             it puts far apart are dropped                   -> LoopResult
+                             the loops it rejects go to the queue with the reason, pairs it
+                             closes join them, candidates it puts far apart are dropped
 
 Expensive results (retrieval, background statistics, two-view fits) live in ``cache``, so a
 re-map after a threshold change costs the arithmetic, not the retrieval or the geometry.
@@ -88,7 +88,8 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     """Stage 7: (status, reason, closure, poses, rule). The automatic loops and the steps make
     one robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a
     candidate with the reason. The solved map is a measurement too (docs/method.md, stage 7):
-    a candidate whose ends it joins and puts within ``auto_distance_steps``, whose views share
+    a pair not automatic (a candidate, or one stage 5 dropped for its descriptor score) whose
+    ends it joins and puts within ``auto_distance_steps``, whose views share
     ``auto_measured_share`` of a step's inliers but could not measure their distance, becomes
     automatic (rule "the map closes it") and the graph is solved again with it. A candidate
     the map puts further apart than ``closure_slack`` + ``closure_rate`` per step of the
@@ -112,7 +113,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
         return auto, solution, np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1) / solution.unit
 
     auto, solution, closure = solve()
-    cand = np.setdiff1d(np.flatnonzero(status == Status.CANDIDATE.value), auto[~solution.kept])
+    cand = np.flatnonzero(status != Status.AUTO.value)   # candidates and the pairs stage 5 dropped
     if pairs.inliers is None or pairs.step_inliers is None:   # not measured: nothing to share
         cand = cand[:0]
     shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.auto_measured_share * pairs.step_inliers[cand]) \
