@@ -12,6 +12,7 @@ the next, and every number it reads is a ``MapParams`` entry (``engine.params.PA
 7. ``pose_graph.solve``      consistency: a robust pose graph of steps and automatic loops;
                              the loops it rejects go to the queue with the reason, pairs it
                              closes join them, candidates it puts far apart are dropped
+                                                                             -> LoopResult
 
 Expensive results (retrieval, background statistics, two-view fits) live in ``cache``, so a
 re-map after a threshold change costs the arithmetic, not the retrieval or the geometry.
