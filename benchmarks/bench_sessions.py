@@ -401,12 +401,10 @@ def totals(rows: list[dict]) -> dict:
         if r["site"] is None:
             continue
         t["mapped"] += 1
-        for w in r["alone"]:
-            for k in ("places", "found", "false", "between"):
-                t["alone"][k] += w[k]
-        for w in r["site"]["within"]:
-            for k in ("places", "found", "false", "between"):
-                t["site"][k] += w[k]
+        for key, within in (("alone", r["alone"]), ("site", r["site"]["within"])):
+            for w in within:
+                for k in t[key]:
+                    t[key][k] += w[k]
         x = r["site"]["across"]
         t["shared"] += x["shared"]
         t["found"] += x["found"]
