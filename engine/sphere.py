@@ -553,10 +553,10 @@ def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed
     return float(on.sum(axis=0).max() / n)
 
 
-# Points both models must triangulate for a baseline ratio (``baseline_ratio``). On the first
-# synthetic family (seeds 0-4, ratios against true positions) estimates from 20 or more
-# points were all within a factor 1.42 (95 % within 12 %); from 12-19, 5 % were off by more
-# than 1.5x and one by 6x; from fewer, 7-16 % by more than 1.5x.
+# Points the step must triangulate among the loop's inliers for a resection
+# (``resected_distance``). Chosen for the depth-ratio estimate this replaced, on the first
+# synthetic family (seeds 0-4, against true positions): from 20 or more points estimates were
+# all within a factor 1.42 (95 % within 12 %); from 12-19, 5 % were off by more than 1.5x.
 COMMON_POINTS_MIN = 20
 
 
@@ -570,26 +570,60 @@ def _depths_at(tv: TwoView, end: int) -> dict:
     return dict(zip(map(tuple, uv.tolist()), depth.tolist()))
 
 
-def baseline_ratio(loop: TwoView, loop_end: int, step: TwoView, step_end: int) -> float:
-    """How far apart the two views of ``loop`` are, in units of the baseline of ``step``: two
-    models that share one frame (view ``loop_end`` of ``loop``, view ``step_end`` of ``step``;
-    0 is a, 1 is b).
+def resected_distance(loop: TwoView, loop_end: int, step: TwoView, step_end: int) -> tuple[float, float]:
+    """How far apart the two views of ``loop`` are, in units of the baseline of ``step``, and
+    the standard deviation of that: two models that share one frame (view ``loop_end`` of
+    ``loop``, view ``step_end`` of ``step``; 0 is a, 1 is b).
 
-    An essential model knows its baseline's direction, not its length, so it triangulates
-    points in units of that length. A point seen from the shared frame has one true depth,
-    so for every feature of the shared frame that both models triangulate, depth in step
-    units / depth in loop units = |t_loop| / |t_step|: the median over those points, the
-    scale that two-view geometry alone cannot give (the three-view idea of structure from
-    motion). NaN where either has no essential model (a pure rotation is chosen also when
-    every match is far away, so it does not mean the same spot: the first synthetic family
-    has such pairs 5-14 m apart) or fewer than ``COMMON_POINTS_MIN`` points are common."""
-    if loop.model != "essential" or step.model != "essential":
-        return float("nan")
-    in_loop, in_step = _depths_at(loop, loop_end), _depths_at(step, step_end)
-    common = in_loop.keys() & in_step.keys()
-    if len(common) < COMMON_POINTS_MIN:
-        return float("nan")
-    return float(np.median([in_step[k] / in_loop[k] for k in common]))
+    A model of two views knows the direction between them, not the distance. The step
+    triangulates the shared frame's points in units of its own length; the loop's other view
+    sees the same points along its bearings, turned by the loop's rotation. Its position is
+    then the one that puts every point on its bearing: linear least squares in the position
+    (a resection with known rotation, the three-view idea of structure from motion), each
+    point's error taken as an angle (near points pin the position, far ones hardly). Matches
+    missed by more than twice the models' inlier threshold (the step's depths carry their own
+    error) are dropped and the position solved again. Unlike a ratio of the two models'
+    depths it needs no depth from the loop, so it holds where the loop's views are at one spot
+    (a pure rotation, no baseline to triangulate with) and where few points have parallax in
+    both models. The deviation is the position's, from the angular noise ``THRESHOLD``: far
+    content alone leaves it large. NaN, NaN where the step has no essential model, the loop
+    no model, or fewer than ``COMMON_POINTS_MIN`` points are common."""
+    nothing = (float("nan"), float("nan"))
+    if loop.model == "none" or step.model != "essential":
+        return nothing
+    depth_of = _depths_at(step, step_end)
+    m = loop.inlier_mask
+    shared, other = (loop.uv_a[m], loop.uv_b[m]) if loop_end == 0 else (loop.uv_b[m], loop.uv_a[m])
+    keys = list(map(tuple, shared.tolist()))
+    seen = np.array([k in depth_of for k in keys], bool)
+    if seen.sum() < COMMON_POINTS_MIN:
+        return nothing
+    depth = np.array([depth_of[k] for k, s in zip(keys, seen) if s])
+    rotation = np.asarray(loop.rotation, np.float64)             # X_b = R X_a (+ t)
+    if loop_end == 1:
+        rotation = rotation.T
+    points = (bearings(shared[seen]) * depth[:, None]) @ rotation.T   # in the other view's axes
+    rays = bearings(other[seen])
+    used = np.ones(depth.size, bool)
+    for _ in range(3):
+        # minimise sum |(I - f f^T)(P + t)|^2 / |P|^2: each point's distance from its ray, as an angle
+        w2 = 1.0 / np.einsum("ij,ij->i", points[used], points[used])
+        across = np.eye(3)[None] - rays[used, :, None] * rays[used, None, :]
+        normal = np.einsum("k,kij->ij", w2, across)
+        t = -np.linalg.solve(normal + 1e-12 * np.eye(3), np.einsum("k,kij,kj->i", w2, across, points[used]))
+        moved = points + t
+        miss = np.linalg.norm(moved - rays * np.einsum("ij,ij->i", moved, rays)[:, None], axis=1) \
+            / np.linalg.norm(moved, axis=1)
+        keep = miss < 2.0 * THRESHOLD
+        if keep.sum() < COMMON_POINTS_MIN:
+            return nothing
+        if (keep == used).all():
+            break
+        used = keep
+    distance = float(np.linalg.norm(t))
+    along = t / distance if distance > 1e-12 else np.array([1.0, 0.0, 0.0])
+    covariance = THRESHOLD ** 2 * np.linalg.pinv(normal)
+    return distance, float(np.sqrt(max(along @ covariance @ along, 0.0)))
 
 
 def parallax(tv: TwoView) -> float:

@@ -8,7 +8,7 @@ from engine.features import FeatureTable, LocalFeatures, extract
 from engine.shift import apply_shift, canonical_shift, relative_yaw
 from engine.params import MapParams
 from tests.sphere_views import fitted
-from engine.sphere import (COMMON_POINTS_MIN, MODEL_CODES, TwoView, _decompose, baseline_ratio, bearings, motion_azimuth,
+from engine.sphere import (COMMON_POINTS_MIN, resected_distance, MODEL_CODES, TwoView, _decompose, bearings, motion_azimuth,
                            parallax, plane_share, to_uv,
                            two_view, verify_pairs, yaw_of_originals, yaw_of_rotation)
 
@@ -186,21 +186,45 @@ def test_the_distance_between_two_visits_is_measured_in_steps_of_the_path():
     here, step_on, revisit = np.zeros(3), np.array([1.3, 0.0, 0.0]), np.array([0.1, 0.39, 0.0])
     step = fitted(room, here, step_on)
     loop = fitted(room, revisit, here)                 # the node is the loop's second view
-    assert baseline_ratio(loop, 1, step, 0) == pytest.approx(np.linalg.norm(revisit) / 1.3, rel=0.02)
+    distance, sigma = resected_distance(loop, 1, step, 0)
+    assert distance == pytest.approx(np.linalg.norm(revisit) / 1.3, rel=0.02) and sigma < 0.05
     far = fitted(room, np.array([-3.0, 1.0, 0.0]), here)
-    assert baseline_ratio(far, 1, step, 0) == pytest.approx(np.hypot(3.0, 1.0) / 1.3, rel=0.02)
+    assert resected_distance(far, 1, step, 0)[0] == pytest.approx(np.hypot(3.0, 1.0) / 1.3, rel=0.02)
+    # the node as the loop's first view, the revisit's camera turned by 40 degrees: the same distance
+    c, s_ = np.cos(np.radians(40)), np.sin(np.radians(40))
+    turn = np.array([[c, -s_, 0], [s_, c, 0], [0, 0, 1]])
+    turned = fitted(room, here, revisit)
+    turned.uv_b = to_uv((room - revisit) @ turn.T).astype(np.float32)   # X_b = R (X_a - revisit)
+    turned.rotation = turn
+    assert resected_distance(turned, 0, step, 0)[0] == pytest.approx(np.linalg.norm(revisit) / 1.3, rel=0.02)
 
 
-def test_no_distance_without_enough_points_seen_by_both_models_or_without_a_baseline():
+def test_two_visits_at_one_spot_are_measured_though_their_views_have_no_baseline():
+    # The loop's views at one spot fit a pure rotation: nothing for the loop to triangulate,
+    # but the step's points, seen from the revisit along the same bearings, put it there.
+    rng = np.random.default_rng(7)
+    room = rng.uniform([-5, -4, -1.2], [5, 4, 1.5], (150, 3))
+    here, step_on = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    step = fitted(room, here, step_on)
+    same_spot = fitted(room, here + np.array([0.0, 0.02, 0.0]), here, model="rotation")
+    distance, sigma = resected_distance(same_spot, 1, step, 0)
+    assert distance < 0.05 and sigma < 0.05
+
+
+def test_no_distance_without_enough_points_or_from_far_content_alone():
     rng = np.random.default_rng(6)
     room = rng.uniform([-5, -4, -1.2], [5, 4, 1.5], (150, 3))
     here, step_on, revisit = np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.5, 0.0])
     step = fitted(room, here, step_on)
     few = fitted(room[: COMMON_POINTS_MIN - 1], revisit, here)
-    assert np.isnan(baseline_ratio(few, 1, step, 0))
-    # a pure rotation is also what far-away content gives: it does not say "same spot"
-    turned = fitted(room, revisit, here, model="rotation")
-    assert np.isnan(baseline_ratio(turned, 1, step, 0))
+    assert np.isnan(resected_distance(few, 1, step, 0)[0])
+    # content far beyond what one step can triangulate (mountains): no distance to measure,
+    # though the two views are 10 m apart and fit a pure rotation
+    mountains = rng.uniform([-3000, -3000, 50], [3000, 3000, 400], (150, 3))
+    far_step = fitted(mountains, here, step_on)
+    apart = fitted(mountains, np.array([10.0, 0.0, 0.0]), here, model="rotation")
+    distance, sigma = resected_distance(apart, 1, far_step, 0)
+    assert np.isnan(distance) or sigma > 1.0
 
 
 def _planar_step(turn_deg: float, move: np.ndarray, right: float, seed: int = 0):

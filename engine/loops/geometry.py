@@ -5,8 +5,8 @@
 Inliers are physical evidence of the same scene; the rotation gives the loop's ``yaw``. The
 same fit between each end and its next node (``step_inliers``: what one node step away
 shares) and its path neighbour just outside the temporal window (``path_inliers``) gives
-the recording's own reference, and the ratio of a pair's baseline to its ends' steps gives
-how far apart the two views are in node steps (``distance_steps``). ``steps`` reads every
+the recording's own reference, and each end's points, triangulated by its own step and seen
+from the other view, give how far apart the two views are in node steps (``distance_steps``). ``steps`` reads every
 consecutive pair as a relative motion: the step factors of the pose graph (stage 7).
 """
 
@@ -80,27 +80,28 @@ class PairGeometry:
                 best[ok] = np.maximum(best[ok], self.fits(lo, hi)[:, INLIERS].astype(np.int64))
         return best
 
-    def distance_steps(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    def distance_steps(self, a: np.ndarray, b: np.ndarray, max_sigma: float = np.inf) -> np.ndarray:
         """How far apart the two views of each pair are, in node steps: per end, the median of
-        ``engine.sphere.baseline_ratio`` of the pair against the end's steps to its previous and
-        next node; the mean of the two ends (NaN unless both are known). Two views know the
-        direction between them, not the distance; each end's own step is one node step long,
-        and triangulating a point seen by both gives the scale (docs/method.md)."""
+        ``engine.sphere.resected_distance`` of the pair against the end's steps to its previous
+        and next node (those known within ``max_sigma`` steps); the mean of the two ends (NaN
+        unless both are known). Two views know the direction between them, not the distance;
+        each end's own step is one node step long, and the points it triangulates give the
+        scale (docs/method.md)."""
         store = self.cache.setdefault("distance_steps", {})
         rows, m, rec = self.node_rows, self.node_rows.size, self.recording
         out = np.full(a.size, np.nan)
         for k, (i, j) in enumerate(zip(a.tolist(), b.tolist())):
             near = [(end, side, o) for end, side in ((i, 0), (j, 1)) for o in (end - 1, end + 1)
                     if 0 <= o < m and rec[o] == rec[end] and o not in (i, j)]
-            key = (int(rows[i]), int(rows[j])) + tuple((side, int(rows[o])) for _, side, o in near)
+            key = (int(rows[i]), int(rows[j]), float(max_sigma)) + tuple((side, int(rows[o])) for _, side, o in near)
             if key not in store:
-                loop, ratios = self.two_view(rows[i], rows[j]), ([], [])
+                loop, found = self.two_view(rows[i], rows[j]), ([], [])
                 for end, side, o in near:
                     step = self.two_view(rows[min(end, o)], rows[max(end, o)])
-                    r = sphere.baseline_ratio(loop, side, step, 0 if end < o else 1)
-                    if np.isfinite(r):
-                        ratios[side].append(r)
-                store[key] = float(np.mean([np.median(r) for r in ratios])) if all(ratios) else np.nan
+                    d, sigma = sphere.resected_distance(loop, side, step, 0 if end < o else 1)
+                    if sigma <= max_sigma:   # NaN compares False
+                        found[side].append(d)
+                store[key] = float(np.mean([np.median(d) for d in found])) if all(found) else np.nan
             out[k] = store[key]
         return out
 
@@ -131,7 +132,7 @@ class PairGeometry:
                                             self.neighbour_inliers(b, gap, partners=a))
             pairs.step_inliers = np.minimum(self.neighbour_inliers(a, 1), self.neighbour_inliers(b, 1))
             near = np.flatnonzero(pairs.inliers >= max(int(params.auto_inliers), 1))
-            pairs.distance_steps[near] = self.distance_steps(a[near], b[near])
+            pairs.distance_steps[near] = self.distance_steps(a[near], b[near], params.loop_sigma_steps)
         if self.columns is not None and n:
             unknown = ~np.isfinite(pairs.yaw)
             if unknown.any():
