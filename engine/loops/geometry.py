@@ -6,8 +6,9 @@ Inliers are physical evidence of the same scene; the rotation gives the loop's `
 same fit between each end and its next node (``step_inliers``: what one node step away
 shares) and its path neighbour just outside the temporal window (``path_inliers``) gives
 the recording's own reference, and each end's points, triangulated by its own step and seen
-from the other view, give how far apart the two views are in node steps (``distance_steps``). ``steps`` reads every
-consecutive pair as a relative motion: the step factors of the pose graph (stage 7).
+from the other view, give how far apart the two views are in node steps (``distance_steps``).
+``steps`` reads every consecutive pair as a relative motion: the step factors of the pose
+graph (stage 7).
 """
 
 from __future__ import annotations
