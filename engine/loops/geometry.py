@@ -5,10 +5,9 @@
 Inliers are physical evidence of the same scene; the rotation gives the loop's ``yaw``. The
 same fit between each end and its next node (``step_inliers``: what one node step away
 shares) and its path neighbour just outside the temporal window (``path_inliers``) gives
-the recording's own reference, and each end's points, triangulated by its own step and seen
-from the other view, give how far apart the two views are in node steps (``distance_steps``).
-``steps`` reads every consecutive pair as a relative motion: the step factors of the pose
-graph (stage 7).
+the recording's own reference; each end's points, triangulated by its step and seen from the
+other view, say how far apart the views are (``distance_steps``, node steps). ``steps`` reads
+every consecutive pair as a relative motion: the step factors of the pose graph (stage 7).
 """
 
 from __future__ import annotations
@@ -85,9 +84,8 @@ class PairGeometry:
         """How far apart the two views of each pair are, in node steps: per end, the median of
         ``engine.sphere.resected_distance`` of the pair against the end's steps to its previous
         and next node (those known within ``max_sigma`` steps); the mean of the two ends (NaN
-        unless both are known). Two views know the direction between them, not the distance;
-        each end's own step is one node step long, and the points it triangulates give the
-        scale (docs/method.md)."""
+        unless both are known). Each end's own step is one node step long, and the points it
+        triangulates give the scale two views lack (docs/method.md)."""
         store = self.cache.setdefault("distance_steps", {})
         rows, m, rec = self.node_rows, self.node_rows.size, self.recording
         out = np.full(a.size, np.nan)
