@@ -227,6 +227,21 @@ def test_no_distance_without_enough_points_or_from_far_content_alone():
     assert np.isnan(distance) or sigma > 1.0
 
 
+def test_a_position_the_points_do_not_pin_comes_with_its_large_deviation():
+    # Only far content in one narrow direction (60-90 m, within 20 degrees): it pins a revisit
+    # across that direction, not along it, so a distance along it is reported as uncertain
+    # (the map's distance_steps then leaves it unknown), one across it as certain.
+    rng = np.random.default_rng(8)
+    n = 60
+    az, el, r = np.radians(rng.uniform(80, 100, n)), np.radians(rng.uniform(-5, 10, n)), rng.uniform(60, 90, n)
+    content = np.c_[r * np.cos(el) * np.cos(az), r * np.cos(el) * np.sin(az), r * np.sin(el)]
+    here, step = np.zeros(3), fitted(content, np.zeros(3), np.array([1.0, 0.0, 0.0]))
+    along = resected_distance(fitted(content, np.array([0.0, 0.3, 0.0]), here), 1, step, 0)
+    across = resected_distance(fitted(content, np.array([0.3, 0.0, 0.0]), here), 1, step, 0)
+    assert along[1] > MapParams().loop_sigma_steps > across[1]
+    assert across[0] == pytest.approx(0.3, rel=0.05)
+
+
 def _planar_step(turn_deg: float, move: np.ndarray, right: float, seed: int = 0):
     """A ``TwoView`` of a corridor seen before and after a planar move (``move``, m) and turn,
     with only ``right`` of its matches right (the others join random features)."""

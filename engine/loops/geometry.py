@@ -80,7 +80,7 @@ class PairGeometry:
                 best[ok] = np.maximum(best[ok], self.fits(lo, hi)[:, INLIERS].astype(np.int64))
         return best
 
-    def distance_steps(self, a: np.ndarray, b: np.ndarray, max_sigma: float = np.inf) -> np.ndarray:
+    def distance_steps(self, a: np.ndarray, b: np.ndarray, max_sigma: float) -> np.ndarray:
         """How far apart the two views of each pair are, in node steps: per end, the median of
         ``engine.sphere.resected_distance`` of the pair against the end's steps to its previous
         and next node (those known within ``max_sigma`` steps); the mean of the two ends (NaN
