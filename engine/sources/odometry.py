@@ -23,7 +23,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..errors import InputError
-from .orientation import MIN_STEP_S, POSE_TYPES, quaternion_yaw
+from .orientation import MIN_STEP_S, POSE_TYPES, quaternion_yaw, thinned
 
 ODOMETRY_TYPES = ("nav_msgs/msg/Odometry", "geometry_msgs/msg/PoseStamped")
 # Longest time (s) between an image and the odometry message nearest to it. Odometry runs at
@@ -116,23 +116,16 @@ def read_odometry(path: Path, topic: Optional[str] = None) -> tuple[Optional[Odo
 
 def _read(reader: Any, topic: str, min_step: float = MIN_STEP_S) -> Odometry:
     from .poses import MAX_POSE_COORD_M
-    from .rosbag import header_stamp_ns
-
     conns = [c for c in reader.connections if c.topic == topic and c.msgtype in POSE_TYPES]
     t, x, y, yaw = [], [], [], []
-    last = None
-    step_ns = int(min_step * 1e9)
-    for conn, log_ns, raw in reader.messages(connections=conns):
-        ns = header_stamp_ns(raw, reader.is2) or log_ns   # every kind starts with a Header
-        if last is not None and 0 <= ns - last < step_ns:
-            continue
+    for conn, ns, raw, keep in thinned(reader, conns, min_step):
         msg = reader.deserialize(raw, conn.msgtype)
         pose = msg.pose if conn.msgtype == "geometry_msgs/msg/PoseStamped" else msg.pose.pose
         px, py = float(pose.position.x), float(pose.position.y)
         if not (np.isfinite(px) and np.isfinite(py)) or max(abs(px), abs(py)) > MAX_POSE_COORD_M:
             raise InputError(f"odometry topic {topic}: a pose at {ns * 1e-9:.3f} s has position "
                              f"({px:.6g}, {py:.6g}); are the poses in metres?")
-        last = ns
+        keep(ns)
         t.append(ns * 1e-9)
         x.append(px)
         y.append(py)

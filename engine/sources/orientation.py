@@ -81,24 +81,35 @@ def _orientation(msg: Any, msgtype: str) -> Optional[Any]:
     return q if np.isfinite(norm) and norm > 1e-6 else None
 
 
+def thinned(reader: Any, conns: list, min_step: float = MIN_STEP_S):
+    """(conn, header stamp ns, raw) of ``conns``' messages, less those within ``min_step`` s
+    after the last one kept (read from the bytes, never deserialised). The caller calls
+    ``keep(ns)`` on the messages it uses: one it leaves out (no orientation) sets no clock."""
+    from .rosbag import header_stamp_ns   # rosbag imports this module
+
+    last = [None]
+    step_ns = int(min_step * 1e9)
+
+    def keep(ns: int) -> None:
+        last[0] = ns
+
+    for conn, log_ns, raw in reader.messages(connections=conns):
+        ns = header_stamp_ns(raw, reader.is2) or log_ns   # every kind starts with a Header
+        if last[0] is None or not 0 <= ns - last[0] < step_ns:
+            yield conn, ns, raw, keep
+
+
 def read_yaw(reader: Any, topic: str, min_step: float = MIN_STEP_S) -> tuple[np.ndarray, np.ndarray, str]:
     """(stamps s, yaw rad, message type) of ``topic``: header stamps (log time when zero),
     sorted by stamp; messages without an orientation are left out, and messages within
     ``min_step`` s after the last one kept are not read (their stamp comes from the bytes)."""
-    from .rosbag import header_stamp_ns   # rosbag imports this module
-
     conns = [c for c in reader.connections if c.topic == topic and c.msgtype in ORIENTATION_TYPES]
     t, yaw = [], []
-    last = None
-    step_ns = int(min_step * 1e9)
-    for conn, log_ns, raw in reader.messages(connections=conns):
-        ns = header_stamp_ns(raw, reader.is2) or log_ns   # every kind starts with a Header
-        if last is not None and 0 <= ns - last < step_ns:
-            continue
+    for conn, ns, raw, keep in thinned(reader, conns, min_step):
         q = _orientation(reader.deserialize(raw, conn.msgtype), conn.msgtype)
         if q is None:
             continue
-        last = ns
+        keep(ns)
         t.append(ns * 1e-9)
         yaw.append(quaternion_yaw(q))
     order = np.argsort(np.asarray(t, dtype=np.float64), kind="stable")
