@@ -184,6 +184,7 @@ class MapView:
     stamp: np.ndarray
     loops: list = field(default_factory=list)   # (row a, row b, status)
     how: str = ""
+    measured: list = field(default_factory=list)   # (row a, row b, distance_steps) of the loops measured
 
 
 def view_of(graph, names: list[str], how: str = "") -> MapView:
@@ -197,9 +198,11 @@ def view_of(graph, names: list[str], how: str = "") -> MapView:
     for s in np.unique(sess):
         order[sess == s] = np.arange(int((sess == s).sum()))
     stamp = np.array([float(graph.nodes[n]["stamp"]) for n in nodes])
-    loops = [(row[u], row[v], str(d.get("status", "auto"))) for u, v, d in graph.edges(data=True)
-             if d.get("kind") == "loop"]
-    return MapView(sess, order, stamp, loops, how)
+    arcs = [(row[u], row[v], d) for u, v, d in graph.edges(data=True) if d.get("kind") == "loop"]
+    loops = [(a, b, str(d.get("status", "auto"))) for a, b, d in arcs]
+    measured = [(a, b, float(d["distance_steps"])) for a, b, d in arcs
+                if d.get("distance_steps") is not None and np.isfinite(float(d["distance_steps"]))]
+    return MapView(sess, order, stamp, loops, how, measured)
 
 
 def map_alone(descs: Descriptors, params: MapParams) -> MapView:

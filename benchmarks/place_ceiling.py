@@ -2,6 +2,7 @@
 near its threshold (development tool).
 
     python benchmarks/place_ceiling.py --family second --seeds 55,56,57 --cache C
+    python benchmarks/place_ceiling.py --family first --seeds 0,1 --sites --cache S
 
 Stage 7 takes two views as one place when they measure at most ``auto_distance_steps`` node
 steps apart; the evaluation counts two nodes as one place when they are at most 1 m apart.
@@ -15,7 +16,10 @@ The two meet only through the node step's length in metres, which the method doe
    candidates) whose distance was measured: measured steps over true steps, by band of true
    steps, and the loops more than 1 m apart that measure within each threshold.
 
-Reads the recordings of ``bench_families.py``'s cache (``--methods verified`` renders them).
+Reads the recordings of ``bench_families.py``'s cache (``--methods verified`` renders them);
+``--sites``: the day pairs of ``bench_sessions.py``'s cache mapped as one site each, the
+events then being the places the two days share (``bench_sessions.score_across``) and the
+loops every loop of the site.
 """
 
 from __future__ import annotations
@@ -70,23 +74,59 @@ def recording_rows(descs, poses, params: MapParams):
     return closest, measured
 
 
+def site_rows(case, cache: Path, params: MapParams):
+    """``recording_rows`` for a day pair of ``bench_sessions`` mapped as one site: the places the
+    two days share, and every measured loop of the site (within and across the days)."""
+    import bench_sessions as bs
+
+    days = bs.described(case, cache)
+    view = bs.map_together([p for p, _, _ in days], params)
+    x, y = bs.positions(view, [pz for _, _, pz in days])
+    local = np.full(x.size, np.nan)
+    for s in (0, 1):
+        rows = np.flatnonzero(view.session == s)
+        local[rows] = step_lengths(x[rows], y[rows])
+    r1, r2 = np.flatnonzero(view.session == 0), np.flatnonzero(view.session == 1)
+    metres = np.hypot(x[r1][:, None] - x[r2][None], y[r1][:, None] - y[r2][None])
+    ii, jj = np.nonzero(metres <= SAME_PLACE_M)
+    in_steps = metres[ii, jj] / np.maximum(local[r1[ii]], local[r2[jj]])
+    labels = bs._groups(ii, jj)
+    closest = [float(in_steps[labels == e].min()) for e in np.unique(labels)]
+    measured = []
+    for a, b, steps in view.measured:
+        d = float(np.hypot(x[a] - x[b], y[a] - y[b]))
+        measured.append((d / max(local[a], local[b]), steps, d))
+    return closest, measured
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--family", choices=("first", "second"), default="first")
     ap.add_argument("--seeds", default="0")
-    ap.add_argument("--cache", default="/tmp/panotopo-families")
+    ap.add_argument("--cache", help="descriptor cache (default: the benchmark's own)")
+    ap.add_argument("--sites", action="store_true", help="the day pairs of bench_sessions.py, each one site")
     args = ap.parse_args()
     bf.PHOTOMETRIC["value"] = bf.photometric_for("verified")   # the descriptors verified asks for
-    gen = bf.first_family if args.family == "first" else bf.second_family
-    params = MapParams(method="verified", neighbor_node_num=5)
+    seeds = [int(s) for s in args.seeds.split(",")]
     by_route: dict[str, list[float]] = {}
     measured: list[tuple[float, float, float]] = []
-    for case, descs, poses, _fps in gen([int(s) for s in args.seeds.split(",")], Path(args.cache)):
-        closest, rows = recording_rows(descs, poses, params)
-        by_route.setdefault(case.route, []).extend(closest)
+    if args.sites:
+        import bench_sessions as bs
+
+        cache = Path(args.cache or "/tmp/panotopo-sessions")
+        params = MapParams(method="verified")
+        results = ((c.route, site_rows(c, cache, params)) for c in bs.cases(args.family, seeds))
+    else:
+        gen = bf.first_family if args.family == "first" else bf.second_family
+        params = MapParams(method="verified", neighbor_node_num=5)
+        results = ((case.route, recording_rows(descs, poses, params))
+                   for case, descs, poses, _fps in gen(seeds, Path(args.cache or "/tmp/panotopo-families")))
+    for route, (closest, rows) in results:
+        by_route.setdefault(route, []).extend(closest)
         measured.extend(rows)
 
-    print(f"{args.family} family, seeds {args.seeds}: revisit events whose closest same-place pair is "
+    what = "places two days share" if args.sites else "revisit events"
+    print(f"{args.family} family, seeds {args.seeds}: {what} whose closest same-place pair is "
           f"within a threshold (node steps; the most a measured-distance rule at that threshold can close)\n")
     print("| route | events | " + " | ".join(f"<= {t:g}" for t in THRESHOLDS) + " |")
     print("|---|---:|" + "---:|" * len(THRESHOLDS))

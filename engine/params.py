@@ -117,7 +117,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "1.25 / 1.12 = 1.1. Automatic places and false loops there are the same for any "
               "value in 1.0-1.2 (1.3 makes a false loop); 1.1 is also that range's middle. "
               "Chosen in the sixth round (was 1.0, one step by definition) before the second "
-              "family's seeds 31-42 were mapped", 0.0, 100.0),
+              "family's seeds 31-42 were mapped. Re-checked for the resection (round 28, the "
+              "first family's day pairs, place_ceiling.py --sites): loops 0.9-1.1 true steps "
+              "apart measure 0.90-1.05 of it (5th-95th percentile); none more than 1 m apart "
+              "measures within 1.15 steps, two (1.05-1.06 m) within 1.2", 0.0, 100.0),
     Parameter("auto_measured_share", float, 0.6, _NEW,
               "a loop judged by its measured distance also shares at least this share of the "
               "inliers each end shares with its next node (views measured close that share far "
