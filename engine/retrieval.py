@@ -253,7 +253,9 @@ def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, nprob
     probe_start = np.searchsorted(flat[probe_order], np.arange(cells + 1))
     # Candidates: k per (query, recording, probed cell), in the query's slot for that probe.
     width = nprobe * k
-    cand_i = np.full((n, n_seg * width), -1, np.int64)
+    # int32 rows: the table is n x recordings x nprobe x k (a site of 360,000 nodes in 10
+    # recordings: 2.3 GB as int64)
+    cand_i = np.full((n, n_seg * width), -1, np.int32)
     cand_s = np.full((n, n_seg * width), -np.inf, np.float32)
     for c in range(cells):
         mem = members_order[member_start[c]:member_start[c + 1]]
