@@ -53,12 +53,6 @@ def candidates(vectors: np.ndarray, recording: np.ndarray, params: MapParams, ca
     return scored(vectors, background(vectors, recording, params, cache), pair // m, pair % m)
 
 
-# Pairs whose stretches are scored at once: each pair's stretch is 2 * support_half index pairs
-# of several arrays, so all at once grew with the pair count (8.7 million pairs at a site of
-# 120,000 nodes); blocks bound that memory and give the same means.
-SUPPORT_BLOCK = 1 << 20
-
-
 def with_support(vectors: np.ndarray, recording: np.ndarray, pairs: Pairs, params: MapParams, cache: dict) -> Pairs:
     """Stage 2: ``pairs`` with ``support`` (the better of the forward and reverse mean
     calibrated score along the stretch; NaN where there is none) and its ``direction``.
@@ -70,13 +64,9 @@ def with_support(vectors: np.ndarray, recording: np.ndarray, pairs: Pairs, param
     seen, means = cache.get(key, (np.zeros(0, np.int64), np.zeros((0, 2))))   # pair ids sorted, their means
     todo = np.setdiff1d(retrieval.sorted_unique(ids), seen, assume_unique=True)
     if todo.size:
-        new = np.empty((todo.size, 2))
-        for c0 in range(0, todo.size, SUPPORT_BLOCK):   # the stretches' index arrays, a block at a time
-            part = todo[c0:c0 + SUPPORT_BLOCK]
-            for col, d in enumerate((+1, -1)):
-                new[c0:c0 + part.size, col] = retrieval.diagonal_support(
-                    vectors, stats, part // m, part % m, params.support_half, d)[0]
-        seen, means = np.concatenate([seen, todo]), np.concatenate([means, new])
+        new = [retrieval.diagonal_support(vectors, stats, todo // m, todo % m, params.support_half, d)[0]
+               for d in (+1, -1)]
+        seen, means = np.concatenate([seen, todo]), np.concatenate([means, np.stack(new, axis=1)])
         order = np.argsort(seen)
         seen, means = cache[key] = seen[order], means[order]
     both = means[np.searchsorted(seen, ids)]

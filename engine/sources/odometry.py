@@ -116,6 +116,7 @@ def read_odometry(path: Path, topic: Optional[str] = None) -> tuple[Optional[Odo
 
 def _read(reader: Any, topic: str, min_step: float = MIN_STEP_S) -> Odometry:
     from .poses import MAX_POSE_COORD_M
+
     conns = [c for c in reader.connections if c.topic == topic and c.msgtype in POSE_TYPES]
     t, x, y, yaw = [], [], [], []
     for conn, ns, raw, keep in thinned(reader, conns, min_step):

@@ -82,9 +82,9 @@ def _orientation(msg: Any, msgtype: str) -> Optional[Any]:
 
 
 def thinned(reader: Any, conns: list, min_step: float = MIN_STEP_S):
-    """(conn, header stamp ns, raw) of ``conns``' messages, less those within ``min_step`` s
-    after the last one kept (read from the bytes, never deserialised). The caller calls
-    ``keep(ns)`` on the messages it uses: one it leaves out (no orientation) sets no clock."""
+    """(conn, header stamp ns, raw, keep) of ``conns``' messages, less those within ``min_step``
+    s after the last one kept (their stamp read from the bytes, never deserialised). The caller
+    calls ``keep(ns)`` on the messages it uses: one it leaves out (no orientation) sets no clock."""
     from .rosbag import header_stamp_ns   # rosbag imports this module
 
     last = [None]
