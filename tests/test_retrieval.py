@@ -117,6 +117,22 @@ def test_diagonal_support_is_high_along_planted_stretches_and_low_elsewhere():
     assert np.median(rand) < 1.0
 
 
+def test_diagonal_support_is_the_same_scored_in_blocks(monkeypatch):
+    """Large sites score their stretches a block of pairs at a time; a pair's support is its own
+    stretch's, whichever block it falls in."""
+    v, _ = _walk_with_revisits()
+    stats = R.background(v, 5)
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, 1500, 50), rng.integers(1600, 3000, 50)
+    whole = R.diagonal_support(v, stats, a, b, half=6, direction=1)
+    monkeypatch.setattr(R, "SUPPORT_BLOCK", 7)
+    blocks = R.diagonal_support(v, stats, a, b, half=6, direction=1)
+    np.testing.assert_array_equal(whole[1], blocks[1])
+    np.testing.assert_allclose(whole[0], blocks[0], rtol=1e-6)
+    empty = R.diagonal_support(v, stats, a[:0], b[:0], half=6, direction=1)
+    assert empty[0].size == 0 and empty[1].size == 0
+
+
 def test_diagonal_support_skips_pairs_outside_and_near_in_time():
     v = _random(50, 8)
     stats = R.background(v, 3)
