@@ -315,14 +315,20 @@ def score_within(view: MapView, poses: list[Poses], s: int) -> dict:
     return {"nodes": m, "places": int(np.unique(label).size), "found": len(found), "false": fp, "between": between}
 
 
-def score_across(view: MapView, poses: list[Poses]) -> dict:
-    """Shared places and loops across the two sessions (module notes)."""
-    x, y = positions(view, poses)
+def shared_places(view: MapView, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The node pairs across the two sessions within ``RIGHT_M``: (session-0 rows, session-1
+    rows, each pair's place label; module notes)."""
     r1, r2 = np.flatnonzero(view.session == 0), np.flatnonzero(view.session == 1)
     d2 = (x[r1][:, None] - x[r2][None]) ** 2 + (y[r1][:, None] - y[r2][None]) ** 2
     ii, jj = np.nonzero(d2 <= (RIGHT_M + 1e-9) ** 2)
-    label = _groups(ii, jj)
-    pair_event = {(int(r1[a]), int(r2[b])): int(g) for a, b, g in zip(ii, jj, label)}
+    return r1[ii], r2[jj], _groups(ii, jj)
+
+
+def score_across(view: MapView, poses: list[Poses]) -> dict:
+    """Shared places and loops across the two sessions (module notes)."""
+    x, y = positions(view, poses)
+    ra, rb, label = shared_places(view, x, y)
+    pair_event = {(int(a), int(b)): int(g) for a, b, g in zip(ra, rb, label)}
     out = {"shared": int(np.unique(label).size), "found": 0, "right": 0, "between": 0, "false": 0,
            "queue": 0, "queue_false": 0, "with_queue": 0, "joined": False}
     found, with_queue = set(), set()

@@ -86,11 +86,8 @@ def site_rows(case, cache: Path, params: MapParams):
     for s in (0, 1):
         rows = np.flatnonzero(view.session == s)
         local[rows] = step_lengths(x[rows], y[rows])
-    r1, r2 = np.flatnonzero(view.session == 0), np.flatnonzero(view.session == 1)
-    metres = np.hypot(x[r1][:, None] - x[r2][None], y[r1][:, None] - y[r2][None])
-    ii, jj = np.nonzero(metres <= SAME_PLACE_M)
-    in_steps = metres[ii, jj] / np.maximum(local[r1[ii]], local[r2[jj]])
-    labels = bs._groups(ii, jj)
+    ra, rb, labels = bs.shared_places(view, x, y)
+    in_steps = np.hypot(x[ra] - x[rb], y[ra] - y[rb]) / np.maximum(local[ra], local[rb])
     closest = [float(in_steps[labels == e].min()) for e in np.unique(labels)]
     measured = []
     for a, b, steps in view.measured:
