@@ -75,6 +75,12 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("retrieval_k", int, 10, _NEW,
               "best descriptor matches kept per node as loop candidates",
               "the probe of issue 13: true pairs sat among each node's 10 best matches", 1, 200),
+    Parameter("retrieval_k_across", int, 10, _NEW,
+              "several recordings: best matches kept per node in the other recordings together, "
+              "shared equally among them, at least one in each (retrieval_k are kept in its own)",
+              "retrieval_k: with two recordings it is retrieval_k in the other one, as before. A "
+              "budget per recording grew the pairs with nodes x recordings (a site of 10 recordings "
+              "x 36,000 nodes: 9-13 minutes, 6.4 GB); docs/method.md, stage 1", 1, 2000),
     Parameter("candidate_z", float, 3.0, _NEW,
               "a match becomes a candidate for review at this calibrated score (standard "
               "deviations above the two nodes' own background)",

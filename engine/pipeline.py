@@ -282,19 +282,23 @@ def working_copy(rgb: np.ndarray, width: int = WORK_WIDTH) -> np.ndarray:
     return cv2.resize(rgb, (width, max(1, round(h * width / w))), interpolation=cv2.INTER_AREA)
 
 
-def descriptor_defaults(descs: Descriptors) -> dict:
+def descriptor_defaults(descs: Descriptors, method: Optional[str] = None) -> dict:
     """The calibrated thresholds for the descriptor that made ``descs``.
 
     Stored defaults first, then the registered model's; descriptors of a model this
     project does not know (an .npz from any other model) get thresholds calibrated from
     the recording itself (``engine.calibrate.paper_thresholds``, sampled, fine at 100k
-    rows), with the default temporal window of MapParams.
+    rows), with the default temporal window of MapParams. ``method`` "verified" reads
+    neither of those thresholds (its node threshold comes from the recording, its loops
+    from calibrated scores): nothing is calibrated for it (28 s of a site of 360,000 nodes).
     """
     if descs.meta.get("defaults"):
         return dict(descs.meta["defaults"])
     name = descs.meta.get("descriptor", descriptor_registry.DEFAULT_DESCRIPTOR)
     if name in descriptor_registry.REGISTRY:
         return descriptor_registry.defaults_for(name)
+    if method == "verified":
+        return {}
     from .calibrate import paper_thresholds
 
     return paper_thresholds(descs.vectors, MapParams().neighbor_node_num)
@@ -324,7 +328,7 @@ def build_map(descs: Descriptors, params: MapParams = MapParams(), source: str =
         from .calibrate import node_threshold
 
         params = replace(params, node_sim_th=node_threshold(descs.vectors))
-    p = params.resolved(descriptor_defaults(descs))
+    p = params.resolved(descriptor_defaults(descs, params.method))
     if params.uses_shift != bool(descs.meta.get("shift", True)):
         wanted = "panorama-shifted" if params.uses_shift else "unshifted"
         raise InputError(f"method '{p.method}' needs {wanted} descriptors; describe again "

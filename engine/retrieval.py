@@ -16,7 +16,8 @@ Here every question is answered with memory bounded whatever n:
 
 Several recordings (a site) are *segments* of the rows (``segment``: one label per row,
 each recording's rows contiguous). Temporal neighbours exist only within a recording;
-``nearest`` gives every row its best matches in each recording, and ``background`` keeps
+``nearest`` gives every row its k best matches in its own recording and ``k_across`` in the
+others together, shared equally among them (``per_other_recording``), and ``background`` keeps
 each row's statistics against each recording, so a pair across two recordings is judged
 against what "a different place" looks like between those two (another day's light lowers
 every similarity across the days alike; pooled with the rows of its own day, a true match
@@ -157,18 +158,45 @@ def _top_k(sims: np.ndarray, kk: int) -> tuple[np.ndarray, np.ndarray]:
     return top, s
 
 
+def per_other_recording(k_across: int, recordings: int) -> int:
+    """Matches each row keeps in each recording other than its own: ``k_across`` shared
+    equally among the other ``recordings - 1``, rounded up (at least one in each).
+
+    Why a shared budget rather than k in every recording: candidate pairs, and with them
+    the stage-2 support and everything after it, grew with nodes x recordings (a site of 10
+    recordings: 100 matches per node, 8.7 million pairs at 120,000 nodes). With two
+    recordings the budget is k in the other one, as before; with ten, 2 in each of nine.
+    A place seen in several recordings is still matched in every one of them from every
+    node of its stretch, and the places are joined through any of them."""
+    if recordings <= 1:
+        return 0
+    return max(1, -(-int(k_across) // (recordings - 1)))
+
+
+def _layout(segment: np.ndarray, k: int, w: int) -> tuple[np.ndarray, int]:
+    """(base, width): row i's matches in recording s start at column base[i, s]; its own
+    recording first (k columns), then each other recording in order (w columns each)."""
+    n_seg = int(segment[-1]) + 1 if segment.size else 1
+    s = np.arange(n_seg)[None, :]
+    own = segment[:, None]
+    base = np.where(s == own, 0, k + w * (s - (s > own)))
+    return base.astype(np.int64), k + w * (n_seg - 1)
+
+
 def _segment_bounds(segment: np.ndarray) -> list[tuple[int, int]]:
     starts = np.flatnonzero(np.diff(np.concatenate([[-1], segment])) != 0)
     ends = np.concatenate([starts[1:], [segment.size]])
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int], segment: np.ndarray) -> Neighbours:
-    """k per recording: columns [s * k, (s + 1) * k) hold the best rows of recording s."""
+def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int], segment: np.ndarray,
+           w: int) -> Neighbours:
+    """k best in the row's own recording, then w in each other one (``_layout``)."""
     n = v.shape[0]
     bounds = _segment_bounds(segment)
-    out = _empty(n, k * len(bounds))
-    if n == 0 or k == 0:
+    base, width = _layout(segment, k, w)
+    out = _empty(n, width)
+    if n == 0 or width == 0:
         return out
     rows = block_rows_for(n) if block_rows is None else max(1, int(block_rows))
     for r0 in range(0, n, rows):
@@ -176,11 +204,26 @@ def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int], segme
         sims = v[r0:r1] @ v.T
         _mask_window(sims, r0, exclude, -np.inf, segment)
         for s, (c0, c1) in enumerate(bounds):
-            kk = min(k, c1 - c0)
-            top, sim = _top_k(sims[:, c0:c1], kk)
-            out.index[r0:r1, s * k:s * k + kk] = np.where(top >= 0, top + c0, -1)
-            out.sim[r0:r1, s * k:s * k + kk] = sim
+            # rows of one recording are contiguous: this block holds at most a few runs
+            for g0, g1, kk in _runs_by_width(segment, r0, r1, s, k, w, c1 - c0):
+                if kk == 0:
+                    continue
+                top, sim = _top_k(sims[g0 - r0:g1 - r0, c0:c1], kk)
+                cols = base[g0, s] + np.arange(kk)
+                out.index[g0:g1, cols] = np.where(top >= 0, top + c0, -1)
+                out.sim[g0:g1, cols] = sim
     return out
+
+
+def _runs_by_width(segment: np.ndarray, r0: int, r1: int, s: int, k: int, w: int, size: int):
+    """(g0, g1, kk) for the runs of rows r0..r1 of one recording: kk matches in recording s
+    (k in their own, w in another; never more than the recording's ``size`` rows)."""
+    seg = segment[r0:r1]
+    cuts = np.flatnonzero(np.diff(seg)) + 1
+    starts = np.concatenate([[0], cuts])
+    ends = np.concatenate([cuts, [seg.size]])
+    for a, b in zip(starts.tolist(), ends.tolist()):
+        yield r0 + a, r0 + b, min(k if seg[a] == s else w, size)
 
 
 # Approximate path: an inverted file searched with matrix products. Rows are grouped
@@ -223,9 +266,10 @@ def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndar
     return centres.astype(np.float32)
 
 
-def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, nprobe: Optional[int] = None,
+def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, w: int, nprobe: Optional[int] = None,
                  seed: int = 0) -> Neighbours:
-    """k per recording, as ``_exact``, from the cells each query probes."""
+    """k in the row's own recording and w in each other one, as ``_exact``, from the cells each
+    query probes."""
     n = v.shape[0]
     n_seg = int(segment[-1]) + 1
     nprobe = NPROBE if nprobe is None else nprobe
@@ -251,12 +295,11 @@ def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, nprob
     flat = probes.ravel()
     probe_order = np.argsort(flat, kind="stable")
     probe_start = np.searchsorted(flat[probe_order], np.arange(cells + 1))
-    # Candidates: k per (query, recording, probed cell), in the query's slot for that probe.
-    width = nprobe * k
-    # int32 rows: the table is n x recordings x nprobe x k (a site of 360,000 nodes in 10
-    # recordings: 2.3 GB as int64)
-    cand_i = np.full((n, n_seg * width), -1, np.int32)
-    cand_s = np.full((n, n_seg * width), -np.inf, np.float32)
+    # Candidates: the final layout (``_layout``) with nprobe slots per match, kk per
+    # (query, recording, probed cell). int32 rows: the table is n x width x nprobe.
+    base, width = _layout(segment, k, w)
+    cand_i = np.full((n, width * nprobe), -1, np.int32)
+    cand_s = np.full((n, width * nprobe), -np.inf, np.float32)
     for c in range(cells):
         mem = members_order[member_start[c]:member_start[c + 1]]
         hits = probe_order[probe_start[c]:probe_start[c + 1]]
@@ -265,25 +308,36 @@ def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, nprob
         q_all, slot_all = hits // nprobe, hits % nprobe
         vm = v[mem]
         parts = _segment_bounds(segment[mem])
-        step = block_rows_for(mem.size)
+        step = max(1, BLOCK_ELEMENTS // mem.size)   # all of a cell's queries at once, as a rule
         for h0 in range(0, q_all.size, step):
             q, slot = q_all[h0:h0 + step], slot_all[h0:h0 + step]
             sims = v[q] @ vm.T
             sims[temporal_neighbours(q[:, None], mem[None, :], exclude, segment)] = -np.inf
             for m0, m1 in parts:
                 s = int(segment[mem[m0]])
-                kk = min(k, m1 - m0)
-                top = np.argpartition(sims[:, m0:m1], m1 - m0 - kk, axis=1)[:, m1 - m0 - kk:]
-                cols = s * width + slot[:, None] * k + np.arange(kk)[None, :]
-                cand_i[q[:, None], cols] = mem[m0 + top]
-                cand_s[q[:, None], cols] = np.take_along_axis(sims[:, m0:m1], top, axis=1)
-    out = _empty(n, k * n_seg)
-    for s in range(n_seg):
-        kk = min(k, width)
-        top, sim = _top_k(cand_s[:, s * width:(s + 1) * width], kk)
-        idx = np.take_along_axis(cand_i[:, s * width:(s + 1) * width], np.maximum(top, 0), axis=1)
-        out.index[:, s * k:s * k + kk] = np.where(top >= 0, idx, -1)
-        out.sim[:, s * k:s * k + kk] = sim
+                own = segment[q] == s
+                for group, kk in ((own, min(k, m1 - m0)), (~own, min(w, m1 - m0))):
+                    if kk == 0 or not group.any():
+                        continue
+                    qs = q[group]
+                    part = sims[group, m0:m1]
+                    top = np.argpartition(part, m1 - m0 - kk, axis=1)[:, m1 - m0 - kk:]
+                    cols = (base[qs, s] * nprobe)[:, None] + slot[group, None] * kk + np.arange(kk)[None, :]
+                    cand_i[qs[:, None], cols] = mem[m0 + top]
+                    cand_s[qs[:, None], cols] = np.take_along_axis(part, top, axis=1)
+    out = _empty(n, width)
+    for r0, r1 in _segment_bounds(segment):   # one layout per recording of the queries
+        for s, (c0, c1) in enumerate(_segment_bounds(segment)):
+            full = k if s == segment[r0] else w
+            kk = min(full, c1 - c0)
+            if kk == 0:
+                continue
+            lo = int(base[r0, s])
+            span = slice(lo * nprobe, (lo + full) * nprobe)
+            top, sim = _top_k(cand_s[r0:r1, span], kk)
+            idx = np.take_along_axis(cand_i[r0:r1, span], np.maximum(top, 0), axis=1)
+            out.index[r0:r1, lo:lo + kk] = np.where(top >= 0, idx, -1)
+            out.sim[r0:r1, lo:lo + kk] = sim
     return out
 
 
@@ -295,10 +349,12 @@ def choose_method(n: int, d: int) -> str:
 
 
 def nearest(vectors: np.ndarray, k: int, exclude: int, *, block_rows: Optional[int] = None,
-            method: str = "auto", segment: Optional[np.ndarray] = None) -> Neighbours:
+            method: str = "auto", segment: Optional[np.ndarray] = None,
+            k_across: Optional[int] = None) -> Neighbours:
     """For every row i its k most similar rows j with |i - j| > exclude, best first; with
-    several recordings (``segment``) its k best in each recording, recording s in columns
-    [s * k, (s + 1) * k), the temporal window only within a recording.
+    several recordings (``segment``) its k best in its own recording (columns [0, k)), then
+    ``per_other_recording(k_across, S)`` best in each other recording in order (``k_across``
+    None: k in each), the temporal window only within a recording.
 
     ``vectors`` (n, d) are L2-normalised rows (cosine = dot product). ``method``:
     "exact" (blocked matrix products, memory rows * n <= BLOCK_ELEMENTS), "approximate"
@@ -314,11 +370,13 @@ def nearest(vectors: np.ndarray, k: int, exclude: int, *, block_rows: Optional[i
     k = int(k)
     exclude = max(0, int(exclude))
     segment = segment_labels(n, segment)
+    n_seg = int(segment[-1]) + 1 if n else 1
+    w = k if k_across is None else per_other_recording(k_across, n_seg)
     if method == "auto":
         method = choose_method(n, d)
     if method == "approximate" and n > 4 * CELL_ROWS:
-        return _approximate(v, k, exclude, segment)
-    return _exact(v, k, exclude, block_rows, segment)
+        return _approximate(v, k, exclude, segment, w)
+    return _exact(v, k, exclude, block_rows, segment, w)
 
 
 def sample_columns(n: int, size: int = BACKGROUND_SAMPLE, seed: int = 0) -> np.ndarray:

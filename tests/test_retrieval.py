@@ -195,11 +195,51 @@ def test_every_row_gets_its_best_matches_in_each_recording(method):
     n = v.shape[0] // 2
     neigh = R.nearest(v, 5, 5, method=method, segment=seg)
     assert neigh.index.shape == (2 * n, 10)
-    assert np.all(seg[neigh.index[:, :5][neigh.index[:, :5] >= 0]] == 0)
-    assert np.all(seg[neigh.index[:, 5:][neigh.index[:, 5:] >= 0]] == 1)
+    own, other = neigh.index[:, :5], neigh.index[:, 5:]   # its own recording first, then the other
+    assert np.all(seg[np.maximum(own, 0)][own >= 0] == np.repeat(seg[:, None], 5, axis=1)[own >= 0])
+    assert np.all(seg[np.maximum(other, 0)][other >= 0] == np.repeat(1 - seg[:, None], 5, axis=1)[other >= 0])
     # the same place on the other day (its copy, or a row beside it) is among the matches there
-    found = np.mean([np.any(np.abs(neigh.index[i, 5:] - (i + n)) <= 3) for i in range(n)])
+    found = np.mean([np.any(np.abs(other[i] - (i + n)) <= 3) for i in range(n)])
     assert found > 0.95
+
+
+def _days(count: int, n: int = 600, d: int = 64, seed: int = 3):
+    """``count`` recordings of one route, each a noisy copy of the first (other light)."""
+    from benchmarks.harness import random_walk_descriptors
+
+    rng = np.random.default_rng(seed)
+    day1 = random_walk_descriptors(n, d, seed, revisit_share=0.0)[0]
+    days = [day1] + [_unit(day1 + 1.5 * rng.standard_normal((n, d)) / np.sqrt(d)) for _ in range(count - 1)]
+    return np.vstack(days).astype(np.float32), np.repeat(np.arange(count), n)
+
+
+@pytest.mark.parametrize("method", ["exact", "approximate"])
+def test_matches_in_the_other_recordings_share_one_budget_and_each_recording_gets_its_part(method):
+    v, seg = _days(4)
+    n = v.shape[0] // 4
+    neigh = R.nearest(v, 6, 5, method=method, segment=seg, k_across=6)
+    w = R.per_other_recording(6, 4)
+    assert w == 2 and neigh.index.shape == (4 * n, 6 + 3 * w)
+    for i in (0, n + 17, 2 * n + 300, 4 * n - 1):
+        own, rest = neigh.index[i, :6], neigh.index[i, 6:].reshape(3, w)
+        assert set(seg[own[own >= 0]]) == {seg[i]}
+        others = [s for s in range(4) if s != seg[i]]
+        for s, cols in zip(others, rest):
+            assert set(seg[cols[cols >= 0]]) == {s}
+    # every stretch of 5 rows (a place driven past) is still matched on every other day
+    place = np.arange(4 * n) % n
+    rest = neigh.index[:, 6:]
+    hit = (np.abs(place[np.maximum(rest, 0)] - place[:, None]) <= 3) & (rest >= 0)
+    per_row = hit.reshape(4 * n, 3, w).any(axis=2)
+    per_stretch = per_row[: 4 * n // 5 * 5].reshape(-1, 5, 3).any(axis=1)
+    assert per_stretch.mean() > 0.97
+
+
+def test_with_two_recordings_the_budget_across_is_the_other_recording_s_k():
+    v, seg = _two_days(n=400)
+    plain = R.nearest(v, 5, 5, method="exact", segment=seg)
+    shared = R.nearest(v, 5, 5, method="exact", segment=seg, k_across=5)
+    assert np.array_equal(plain.index, shared.index)
 
 
 def test_the_temporal_window_does_not_cross_from_one_recording_into_the_next():

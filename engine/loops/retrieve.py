@@ -1,8 +1,8 @@
 """Stages 1 and 2 of ``verified``: candidate pairs by retrieval, calibrated, with their support.
 
 Stage 1 (``candidates``): each node's best ``retrieval_k`` descriptor matches beyond its
-temporal neighbours in each recording (``engine.retrieval``: in blocks, never an n x n
-array), each cosine calibrated as standard deviations above the two nodes' own background
+temporal neighbours in its own recording and ``retrieval_k_across`` in the others, shared
+among them (``engine.retrieval``: in blocks, never an n x n array), each cosine calibrated as standard deviations above the two nodes' own background
 (their similarity to unrelated nodes of the other's recording), so that one threshold means
 the same for any descriptor, scene and pair of recordings.
 
@@ -39,11 +39,13 @@ def scored(vectors: np.ndarray, stats, a: np.ndarray, b: np.ndarray) -> Pairs:
 
 
 def candidates(vectors: np.ndarray, recording: np.ndarray, params: MapParams, cache: dict) -> Pairs:
-    """Stage 1: unique pairs (a < b) of each node's best matches in each recording
-    (``recording``: one label per node), with cosine and score."""
-    key = ("nearest",) + _key(vectors, recording, params.retrieval_k, params.neighbor_node_num)
+    """Stage 1: unique pairs (a < b) of each node's best matches in its own recording and
+    across the others (``recording``: one label per node), with cosine and score."""
+    key = ("nearest",) + _key(vectors, recording, params.retrieval_k, params.retrieval_k_across,
+                              params.neighbor_node_num)
     if key not in cache:
-        cache[key] = retrieval.nearest(vectors, params.retrieval_k, params.neighbor_node_num, segment=recording)
+        cache[key] = retrieval.nearest(vectors, params.retrieval_k, params.neighbor_node_num, segment=recording,
+                                       k_across=params.retrieval_k_across)
     neigh = cache[key]
     m, k = neigh.index.shape
     rows = np.repeat(np.arange(m, dtype=np.int64), k)
