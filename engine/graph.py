@@ -541,8 +541,10 @@ class TopoMap:
         path = Path(path)
         if not path.is_file():
             raise InputError(f"{path}: no such file")
+        from .graphml_read import read_graphml
+
         try:
-            g = nx.read_graphml(path)
+            g = read_graphml(path)   # streamed: networkx's reader holds the whole XML tree
         except Exception as exc:  # XML or GraphML errors all mean the same to a user
             raise InputError(f"{path}: cannot read GraphML ({exc.__class__.__name__})") from None
         if not str(g.graph.get("generator", "")).startswith("panotopo"):
