@@ -256,9 +256,13 @@ def _kmeans(v: np.ndarray, centre: np.ndarray, cells: int, seed: int) -> np.ndar
     centres = sample[rng.choice(sample.shape[0], cells, replace=False)].copy()
     for _ in range(KMEANS_ITERATIONS):
         label = np.argmax(sample @ centres.T, axis=1)
-        onehot = np.zeros((cells, sample.shape[0]), np.float32)
-        onehot[label, np.arange(sample.shape[0])] = 1.0
-        sums = onehot @ sample          # per-cell sums as one product (np.add.at is slow)
+        # per-cell sums over the sample sorted by cell (np.add.at is slow; a one-hot product
+        # costs cells x sample x d: 16 GFLOP per iteration at 360,000 rows)
+        order = np.argsort(label, kind="stable")
+        counts = np.bincount(label, minlength=cells)
+        sums = np.zeros((cells, sample.shape[1]), np.float32)
+        filled = counts > 0
+        sums[filled] = np.add.reduceat(sample[order], np.concatenate([[0], np.cumsum(counts)[:-1]])[filled], axis=0)
         norm = np.linalg.norm(sums, axis=1)
         empty = norm == 0   # an empty cell restarts on a random sample row
         sums[empty] = sample[rng.choice(sample.shape[0], int(empty.sum()))]
