@@ -289,14 +289,15 @@ class TopoMap:
     def loops(self, statuses: Optional[Iterable[str]] = None) -> list[tuple[str, str, dict]]:
         """Loop arcs (u, v, attributes) with u the lower index, sorted by index."""
         wanted = None if statuses is None else set(statuses)
+        index = dict(self.graph.nodes(data="index"))   # one table: the node view is slow per lookup
         out = []
         for u, v, d in self.graph.edges(data=True):
             if d.get("kind") != "loop" or (wanted is not None and d.get("status") not in wanted):
                 continue
-            if self.graph.nodes[u]["index"] > self.graph.nodes[v]["index"]:
+            if index[u] > index[v]:
                 u, v = v, u
             out.append((u, v, d))
-        out.sort(key=lambda e: (self.graph.nodes[e[0]]["index"], self.graph.nodes[e[1]]["index"]))
+        out.sort(key=lambda e: (index[e[0]], index[e[1]]))
         return out
 
     def _loop_attrs(self, u: str, v: str) -> dict:
