@@ -89,6 +89,46 @@ def test_two_recordings_are_two_chains_joined_only_by_loops():
     assert np.isfinite(sol.poses).all()
 
 
+def test_recordings_that_start_elsewhere_facing_elsewhere_are_joined_by_all_their_loops():
+    """Three recordings of one square: the second starts a side and a half in (facing a
+    quarter turn round), the third two and a half sides in (a half turn round), each
+    dead-reckoned from the origin facing 0. The loops are kept and close the square."""
+    m1, s1 = _square(laps=1, noise_deg=2.0)
+    n1 = m1 - 1
+    yaw = np.concatenate([s1.yaw, [0.0], np.roll(s1.yaw, -15), [0.0], np.roll(s1.yaw, -25)])
+    steps = Steps(yaw=yaw, motion=np.zeros(yaw.size), still=np.zeros(yaw.size, bool),
+                  ambiguous=np.zeros(yaw.size, bool))
+    a2, a3 = np.arange(15, n1, 3), np.arange(25, n1, 3)
+    loops = Loops(a=np.concatenate([a2, a3]), b=np.concatenate([m1 + a2 - 15, 2 * m1 + a3 - 25]),
+                  yaw=np.zeros(a2.size + a3.size))
+    sol = solve(3 * m1, steps, loops, MapParams(), chain_starts=[0, m1, 2 * m1])
+    assert sol.kept.all()
+    xy = sol.poses[:, :2]
+    assert np.max(np.linalg.norm(xy[loops.a] - xy[loops.b], axis=1)) < 1.0
+
+
+def test_the_solver_starts_each_recording_where_most_of_its_loops_put_it():
+    from engine.loops.pose_graph import _aligned
+    from engine.planar import dead_reckoning
+
+    m1, s1 = _square(laps=1)
+    yaw = np.concatenate([s1.yaw, [0.0], np.roll(s1.yaw, -15), [0.0], s1.yaw])
+    n = yaw.size + 1
+    dx, dy = np.ones(yaw.size), np.zeros(yaw.size)
+    starts = np.array([0, m1, 2 * m1])
+    dr = dead_reckoning(dx, dy, np.radians(yaw), n, starts)
+    a = np.arange(15, m1 - 1, 2)
+    b = m1 + a - 15
+    wrong = np.zeros(a.size)
+    wrong[:3] = 120.0                              # a few loops read a wrong heading
+    start = _aligned(dr, starts, n, Loops(a=a, b=b, yaw=wrong), np.zeros(3, bool), np.radians(30.0))
+    ok = slice(3, None)
+    assert np.max(np.linalg.norm(start[a[ok], :2] - start[b[ok], :2], axis=1)) < 1e-6
+    assert np.allclose(np.angle(np.exp(1j * (start[b[ok], 2] - start[a[ok], 2]))), 0.0, atol=1e-6)
+    assert np.array_equal(start[:m1], dr[:m1])     # the first recording fixes the map
+    assert np.array_equal(start[2 * m1:], dr[2 * m1:])   # a recording no loop joins stays put
+
+
 def test_hops_follow_the_path_and_the_kept_loops():
     m, steps = _square()
     loops = Loops(a=np.array([0]), b=np.array([4 * SIDE]), yaw=np.zeros(1))

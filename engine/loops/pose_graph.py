@@ -127,6 +127,7 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
     def pose(p) -> "gtsam.Pose2":
         return gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
 
+    start = _aligned(start, chain_starts, m, loops, has_gps, np.radians(3 * params.loop_turn_sigma_deg))
     for c, first in enumerate(chain_starts):   # each chain a prior; the first fixes the map (unless GPS does)
         sigma = 1e-3 if c == 0 and not has_gps[c] else _FREE_STEP
         add(gtsam.PriorFactorPose2(int(first), pose(start[first]), gtsam.noiseModel.Isotropic.Sigma(3, sigma)), True)
@@ -176,6 +177,46 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
     hops = _hops(keys, segments, loops, kept)
     poses[:, 2] = np.degrees((poses[:, 2] + np.pi) % (2 * np.pi) - np.pi)
     return Solution(poses=poses, kept=kept, outvoted_steps=outvoted, hops=hops, unit=f.unit)
+
+
+def _aligned(start: np.ndarray, chain_starts: np.ndarray, m: int, loops: Loops, has_gps: np.ndarray,
+             tolerance: float) -> np.ndarray:
+    """Where the solver starts: each chain after the first (without GPS) moved rigidly onto the
+    chains already placed, by the loops that join them.
+
+    Every chain is dead-reckoned from the origin facing 0, so a second recording that starts
+    elsewhere, facing elsewhere, begins wrong by its whole start pose; the robust solver's first
+    solve then settles in a wrong turn and rejects every loop across (three days of one world:
+    all 147 of them). Each loop with a heading says where the chain should be turned
+    (``phi``); the turn most of them agree on within ``tolerance`` (three loop standard
+    deviations of heading) wins, their circular mean is the turn, the median of their shifts
+    the shift. A start only: the factors are unchanged, and a chain no loop joins stays put."""
+    start = start.copy()
+    chain_of = recording_of(m, chain_starts)
+    placed = np.asarray(has_gps, bool).copy()
+    placed[0] = True
+    known = np.isfinite(loops.yaw)
+    a, b, yaw = loops.a[known], loops.b[known], np.radians(loops.yaw[known])
+    moved = True
+    while moved and not placed.all():
+        moved = False
+        for c in np.flatnonzero(~placed).tolist():
+            from_a, from_b = placed[chain_of[a]] & (chain_of[b] == c), placed[chain_of[b]] & (chain_of[a] == c)
+            p, q = np.concatenate([a[from_a], b[from_b]]), np.concatenate([b[from_a], a[from_b]])
+            if p.size == 0:
+                continue
+            # a loop (a, b, yaw) says heading(b) = heading(a) + yaw; q on chain c, p placed
+            phi = start[p, 2] + np.concatenate([yaw[from_a], -yaw[from_b]]) - start[q, 2]
+            near = np.abs(np.angle(np.exp(1j * (phi[:, None] - phi[None, :])))) <= tolerance
+            agree = near[np.argmax(near.sum(axis=1))]
+            turn = float(np.angle(np.exp(1j * phi[agree]).mean()))
+            rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+            shift = np.median(start[p[agree], :2] - start[q[agree], :2] @ rot.T, axis=0)
+            rows = chain_of == c
+            start[rows, :2] = start[rows, :2] @ rot.T + shift
+            start[rows, 2] += turn
+            placed[c] = moved = True
+    return start
 
 
 def _spread(dr: np.ndarray, keys: np.ndarray, solved: np.ndarray, segments) -> np.ndarray:
