@@ -42,7 +42,7 @@ def _value(kind: type, text: str):
 
 def read_graphml(path: str | Path) -> nx.Graph:
     """The graph in ``path`` (``GraphMLError`` or ``ET.ParseError`` when it cannot be read)."""
-    keys: dict[str, tuple[str, type, str]] = {}     # id -> (name, type, for)
+    keys: dict[str, tuple[str, type]] = {}     # id -> (name, type)
     graph_data: dict = {}
     g = None
     open_tags: list[str] = []
@@ -72,14 +72,14 @@ def read_graphml(path: str | Path) -> nx.Graph:
                 raise GraphMLError("yFiles data are not read")
             if name is None or (kind or "string") not in _TYPES:
                 raise GraphMLError(f"key {elem.get('id')!r} has no name or an unknown type {kind!r}")
-            keys[elem.get("id")] = (name, _TYPES[kind or "string"], elem.get("for", ""))
+            keys[elem.get("id")] = (name, _TYPES[kind or "string"])
         elif tag == "data":
             if len(elem):
                 raise GraphMLError("data with sub-elements (yFiles) are not read")
             key = elem.get("key")
             if key not in keys:
                 raise GraphMLError(f"data of an undeclared key {key!r}")
-            name, kind, _ = keys[key]   # an empty element is "" whatever its type, as networkx reads it
+            name, kind = keys[key]   # an empty element is "" whatever its type, as networkx reads it
             (graph_data if owner == "graph" else data)[name] = "" if elem.text is None else _value(kind, elem.text)
         elif tag == "node":
             node = elem.get("id")

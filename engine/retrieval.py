@@ -204,26 +204,16 @@ def _exact(v: np.ndarray, k: int, exclude: int, block_rows: Optional[int], segme
         sims = v[r0:r1] @ v.T
         _mask_window(sims, r0, exclude, -np.inf, segment)
         for s, (c0, c1) in enumerate(bounds):
-            # rows of one recording are contiguous: this block holds at most a few runs
-            for g0, g1, kk in _runs_by_width(segment, r0, r1, s, k, w, c1 - c0):
+            # the block's rows of each recording: k matches in their own, w in another
+            for g0, g1 in _segment_bounds(segment[r0:r1]):
+                kk = min(k if segment[r0 + g0] == s else w, c1 - c0)
                 if kk == 0:
                     continue
-                top, sim = _top_k(sims[g0 - r0:g1 - r0, c0:c1], kk)
-                cols = base[g0, s] + np.arange(kk)
-                out.index[g0:g1, cols] = np.where(top >= 0, top + c0, -1)
-                out.sim[g0:g1, cols] = sim
+                top, sim = _top_k(sims[g0:g1, c0:c1], kk)
+                cols = base[r0 + g0, s] + np.arange(kk)
+                out.index[r0 + g0:r0 + g1, cols] = np.where(top >= 0, top + c0, -1)
+                out.sim[r0 + g0:r0 + g1, cols] = sim
     return out
-
-
-def _runs_by_width(segment: np.ndarray, r0: int, r1: int, s: int, k: int, w: int, size: int):
-    """(g0, g1, kk) for the runs of rows r0..r1 of one recording: kk matches in recording s
-    (k in their own, w in another; never more than the recording's ``size`` rows)."""
-    seg = segment[r0:r1]
-    cuts = np.flatnonzero(np.diff(seg)) + 1
-    starts = np.concatenate([[0], cuts])
-    ends = np.concatenate([cuts, [seg.size]])
-    for a, b in zip(starts.tolist(), ends.tolist()):
-        yield r0 + a, r0 + b, min(k if seg[a] == s else w, size)
 
 
 # Approximate path: an inverted file searched with matrix products. Rows are grouped
@@ -330,8 +320,9 @@ def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, w: in
                     cand_i[qs[:, None], cols] = mem[m0 + top]
                     cand_s[qs[:, None], cols] = np.take_along_axis(part, top, axis=1)
     out = _empty(n, width)
-    for r0, r1 in _segment_bounds(segment):   # one layout per recording of the queries
-        for s, (c0, c1) in enumerate(_segment_bounds(segment)):
+    bounds = _segment_bounds(segment)
+    for r0, r1 in bounds:   # one layout per recording of the queries
+        for s, (c0, c1) in enumerate(bounds):
             full = k if s == segment[r0] else w
             kk = min(full, c1 - c0)
             if kk == 0:

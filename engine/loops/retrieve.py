@@ -2,9 +2,10 @@
 
 Stage 1 (``candidates``): each node's best ``retrieval_k`` descriptor matches beyond its
 temporal neighbours in its own recording and ``retrieval_k_across`` in the others, shared
-among them (``engine.retrieval``: in blocks, never an n x n array), each cosine calibrated as standard deviations above the two nodes' own background
-(their similarity to unrelated nodes of the other's recording), so that one threshold means
-the same for any descriptor, scene and pair of recordings.
+among them (``engine.retrieval``: in blocks, never an n x n array), each cosine calibrated
+as standard deviations above the two nodes' own background (their similarity to unrelated
+nodes of the other's recording), so that one threshold means the same for any descriptor,
+scene and pair of recordings.
 
 Stage 2 (``with_support``): the mean calibrated score along the stretch through each pair,
 forwards (the same way again) and backwards (a reverse drive): the paper's window count,
