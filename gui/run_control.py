@@ -159,7 +159,7 @@ class RunControl(QObject):
                 return
             site.row_starts = list(result.row_starts)
         self.w.doc.describe_settings = result.job.settings
-        self._defaults = descriptor_defaults(result.descs)
+        self._defaults = descriptor_defaults(result.descs, result.job.params.method)   # verified: none to calibrate
         self.w.doc.install(prepared, result.descs)
         self._set_known_shifts(result.descs)
         if needs_remap(result.job.params, self.w.doc.params):

@@ -31,6 +31,19 @@ def test_unknown_descriptor_gets_thresholds_from_the_recording(foreign):
     assert 0.0 < th["loop_sim_th"] < 1.0 and 0.0 < th["node_sim_th"] < 1.0
 
 
+def test_verified_calibrates_no_paper_threshold_it_does_not_read(foreign, monkeypatch):
+    import engine.calibrate
+
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("the paper's thresholds were calibrated for verified")
+
+    monkeypatch.setattr(engine.calibrate, "paper_thresholds", refuse)
+    path, _ = foreign
+    descs = Descriptors.load(path)
+    assert descriptor_defaults(descs, "verified") == {}
+    assert build_map(descs, MapParams(method="verified")).node_count > 1
+
+
 @pytest.mark.parametrize("method", ["ours", "simple", "verified"])
 def test_build_map_maps_a_foreign_npz(foreign, method):
     path, origin = foreign
