@@ -265,7 +265,6 @@ def _approximate(v: np.ndarray, k: int, exclude: int, segment: np.ndarray, w: in
     """k in the row's own recording and w in each other one, as ``_exact``, from the cells each
     query probes."""
     n = v.shape[0]
-    n_seg = int(segment[-1]) + 1
     nprobe = NPROBE if nprobe is None else nprobe
     cells = int(max(1, min(n // 4, round(n / CELL_ROWS))))
     nprobe = int(min(nprobe, cells))
