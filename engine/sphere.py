@@ -560,6 +560,9 @@ def plane_share(r: np.ndarray, t: np.ndarray, a: np.ndarray, b: np.ndarray, seed
 # resection from 8-19 points put 48 of the first family's day pairs beyond 2 m within 1.1 steps
 # (far content fitted as a pure rotation), none from 20 on (docs/method.md, stage 4).
 COMMON_POINTS_MIN = 20
+# Times the resection drops the matches its position misses and solves again (wrong matches
+# move the first solution); the position returned is always solved from the matches kept.
+RESECTION_DROPS = 3
 
 
 def _depths_at(tv: TwoView, end: int) -> dict:
@@ -607,12 +610,14 @@ def resected_distance(loop: TwoView, loop_end: int, step: TwoView, step_end: int
     points = (bearings(shared[seen]) * depth[:, None]) @ rotation.T   # in the other view's axes
     rays = bearings(other[seen])
     used = np.ones(depth.size, bool)
-    for _ in range(3):
+    for drops in range(RESECTION_DROPS + 1):
         # minimise sum |(I - f f^T)(P + t)|^2 / |P|^2: each point's distance from its ray, as an angle
         w2 = 1.0 / np.einsum("ij,ij->i", points[used], points[used])
         across = np.eye(3)[None] - rays[used, :, None] * rays[used, None, :]
         normal = np.einsum("k,kij->ij", w2, across)
         t = -np.linalg.solve(normal + 1e-12 * np.eye(3), np.einsum("k,kij,kj->i", w2, across, points[used]))
+        if drops == RESECTION_DROPS:
+            break          # the position solved from the last set kept
         moved = points + t
         miss = np.linalg.norm(moved - rays * np.einsum("ij,ij->i", moved, rays)[:, None], axis=1) \
             / np.linalg.norm(moved, axis=1)

@@ -199,6 +199,20 @@ def test_the_distance_between_two_visits_is_measured_in_steps_of_the_path():
     assert resected_distance(turned, 0, step, 0)[0] == pytest.approx(np.linalg.norm(revisit) / 1.3, rel=0.02)
 
 
+def test_wrong_matches_among_the_loops_inliers_do_not_move_the_measured_distance():
+    # A tenth of the revisit's matches are wrong by a few degrees (inliers of the loop's
+    # model can be near misses): the position drops them and is solved from those it keeps.
+    rng = np.random.default_rng(11)
+    room = rng.uniform([-5, -4, -1.2], [5, 4, 1.5], (150, 3))
+    here, step_on, revisit = np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.3, 0.5, 0.0])
+    step = fitted(room, here, step_on)
+    loop = fitted(room, revisit, here)
+    wrong = rng.choice(150, 15, replace=False)
+    loop.uv_a[wrong] += rng.choice([-1.0, 1.0], (15, 2)) * rng.uniform(0.01, 0.03, (15, 2))
+    distance, sigma = resected_distance(loop, 1, step, 0)
+    assert distance == pytest.approx(np.linalg.norm(revisit), rel=0.02) and sigma < 0.05
+
+
 def test_two_visits_at_one_spot_are_measured_though_their_views_have_no_baseline():
     # The loop's views at one spot fit a pure rotation: nothing for the loop to triangulate,
     # but the step's points, seen from the revisit along the same bearings, put it there.
