@@ -14,8 +14,9 @@ For each ``--k-across`` value the three .npz files are mapped as one site (``eng
 and each pair of recordings is scored as ``bench_sessions.score_across`` scores a day pair:
 shared places (node pairs across the two within 1 m, grouped), found when an automatic loop
 joins two of their nodes directly (a place joined only through the third recording is not
-counted: a lower bound), loops across right / 1-2 m / false (beyond 2 m). Within each
-recording: revisits found and false loops as ``bench_sessions.score_within``. Prints a table;
+counted: a lower bound), with the queue when a candidate does, loops across right / 1-2 m /
+false (beyond 2 m). Within each recording: revisits found and false loops as
+``bench_sessions.score_within``. Prints a table;
 appends nothing to runs.csv (the two-recording figures are ``bench_sessions``').
 """
 
@@ -109,29 +110,30 @@ def main() -> None:
     routes = [r for r in args.routes.split(",") if r] if args.routes else None
     bf.PHOTOMETRIC["value"] = bf.photometric_for(MapParams().method)
     print("| k_across (each other) | route | look | seed | nodes | shared places found 1-2, 1-3, 2-3 | "
-          "across right / 1-2 m / false | within: revisits found (false) | seconds |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "with queue | across right / 1-2 m / false | within: revisits found (false) | seconds |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     totals = {}
     for ka in [int(x) for x in args.k_across.split(",")]:
         params = MapParams(retrieval_k_across=ka)
-        tot = totals.setdefault(ka, {"shared": 0, "found": 0, "right": 0, "between": 0, "false": 0,
+        tot = totals.setdefault(ka, {"shared": 0, "found": 0, "with_queue": 0, "right": 0, "between": 0, "false": 0,
                                      "places": 0, "within": 0, "within_false": 0})
         for case in bs.cases(args.family, seeds, routes):
             t0 = time.perf_counter()
             r = run_case(case, Path(args.cache), params)
             x = r["across"]
-            for key in ("shared", "found", "right", "between", "false"):
+            for key in ("shared", "found", "with_queue", "right", "between", "false"):
                 tot[key] += sum(x[p][key] for p in PAIRS)
             tot["places"] += sum(w["places"] for w in r["within"])
             tot["within"] += sum(w["found"] for w in r["within"])
             tot["within_false"] += sum(w["false"] for w in r["within"])
             found = ", ".join(f"{x[p]['found']}/{x[p]['shared']}" for p in PAIRS)
+            queued = ", ".join(f"{x[p]['with_queue']}/{x[p]['shared']}" for p in PAIRS)
             loops = " / ".join(str(sum(x[p][k] for p in PAIRS)) for k in ("right", "between", "false"))
             within = ", ".join(f"{w['found']}/{w['places']}" for w in r["within"])
-            print(f"| {ka} ({per_other_recording(ka, 3)}) | {case.route} | {case.look} | {case.seed} | {r['nodes']} | {found} | {loops} | {within} "
+            print(f"| {ka} ({per_other_recording(ka, 3)}) | {case.route} | {case.look} | {case.seed} | {r['nodes']} | {found} | {queued} | {loops} | {within} "
                   f"({sum(w['false'] for w in r['within'])}) | {time.perf_counter() - t0:.0f} |", flush=True)
     for ka, t in totals.items():
-        print(f"k_across {ka}: shared places found {t['found']}/{t['shared']}, loops across right {t['right']}, "
+        print(f"k_across {ka}: shared places found {t['found']}/{t['shared']} (with the queue {t['with_queue']}), loops across right {t['right']}, "
               f"1-2 m {t['between']}, false {t['false']}; within {t['within']}/{t['places']} "
               f"({t['within_false']} false)")
 
