@@ -130,10 +130,12 @@ def main() -> None:
             queued = ", ".join(f"{x[p]['with_queue']}/{x[p]['shared']}" for p in PAIRS)
             loops = " / ".join(str(sum(x[p][k] for p in PAIRS)) for k in ("right", "between", "false"))
             within = ", ".join(f"{w['found']}/{w['places']}" for w in r["within"])
-            print(f"| {ka} ({per_other_recording(ka, 3)}) | {case.route} | {case.look} | {case.seed} | {r['nodes']} | {found} | {queued} | {loops} | {within} "
+            print(f"| {ka} ({per_other_recording(ka, 3)}) | {case.route} | {case.look} | {case.seed} | {r['nodes']} "
+                  f"| {found} | {queued} | {loops} | {within} "
                   f"({sum(w['false'] for w in r['within'])}) | {time.perf_counter() - t0:.0f} |", flush=True)
     for ka, t in totals.items():
-        print(f"k_across {ka}: shared places found {t['found']}/{t['shared']} (with the queue {t['with_queue']}), loops across right {t['right']}, "
+        print(f"k_across {ka}: shared places found {t['found']}/{t['shared']} (with the queue {t['with_queue']}), "
+              f"loops across right {t['right']}, "
               f"1-2 m {t['between']}, false {t['false']}; within {t['within']}/{t['places']} "
               f"({t['within_false']} false)")
 
