@@ -98,9 +98,16 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("auto_support", float, 3.0, _NEW,
               "mean calibrated score along the stretch for an automatic loop",
               "chosen on the first synthetic family", 0.0, 100.0),
-    Parameter("auto_inliers", int, 40, _NEW,
-              "two-view inliers for an automatic loop",
-              "the probe of issue 13 (false pairs at most 40 outdoors); chosen on the first family",
+    Parameter("auto_inliers", int, 20, _NEW,
+              "two-view inliers for an automatic loop (and for its views' distance to be measured)",
+              "the fewest points the distance measurement takes (engine.sphere.COMMON_POINTS_MIN): "
+              "below it a fit says too little; whether the views are one place is judged against "
+              "the recording's own step (auto_step_share, auto_distance_steps) and the pose graph. "
+              "Was 40 (the probe of issue 13: false pairs at most 40 outdoors, before those "
+              "relative checks) until round 32: indoors a node step shares 17-34 inliers, so 40 "
+              "asked more of a revisit than of a step. First family (tuning, seeds 0-4): day "
+              "pairs 81 to 90 of 100 places, single recordings 45/50 either way, no false loop; "
+              "15 and 20 alike (docs/method.md)",
               0, 100_000),
     Parameter("auto_geometry_z", float, 3.5, _NEW,
               "calibrated score for an automatic loop that geometry confirms",

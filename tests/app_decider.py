@@ -23,6 +23,7 @@ from engine.graph import TopoMap  # noqa: E402
 from engine.journal import Journal  # noqa: E402
 from gui.model import MapDocument, ReviewQueue  # noqa: E402
 from gui.model import journal as records  # noqa: E402
+from tests.child_lines import say  # noqa: E402
 
 LOOPS = 900
 SPAN = 1000
@@ -54,11 +55,11 @@ def main() -> None:
     queue = ReviewQueue(doc)
     done = {r.key for r in doc.loop_rows() if r.status == "confirmed"}
     n = max((k[0] // 10 for k in done), default=-1)
-    print("ready", flush=True)
+    say("ready")
     while n + 1 < LOOPS:
         n += 1
         queue.decide_keys([key_of(n)], "confirmed")
-        print(f"ack {n}", flush=True)
+        say(f"ack {n}")
         time.sleep(period)
 
 

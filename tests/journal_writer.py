@@ -16,17 +16,18 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from engine.journal import Journal  # noqa: E402
+from tests.child_lines import say  # noqa: E402
 
 
 def main() -> None:
     session, period = sys.argv[1], float(sys.argv[2])
     journal = Journal.open(session)
     n = max((r["decision"] for r in journal.replay()), default=0)
-    print("ready", flush=True)
+    say("ready")
     while True:
         n += 1
         journal.append({"decision": n, "frames": [n, n + 100], "status": "confirmed"})
-        print(f"ack {n}", flush=True)
+        say(f"ack {n}")
         time.sleep(period)
 
 

@@ -51,6 +51,15 @@ def test_two_views_sharing_less_than_one_node_step_are_not_an_automatic_loop():
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
 
+def test_a_revisit_in_a_bare_corridor_is_found_when_its_views_share_what_a_step_shares():
+    # Indoors, on bare walls, a node step shares some 20-30 inliers: a revisit there cannot
+    # show more than a step does. Sharing a step's worth it is one place; sharing half of what
+    # its steps share it is the same corridor seen from elsewhere, left to a person.
+    step = 24
+    c = matches(a=[0, 30], b=[100, 130], score=[P.auto_geometry_z + 1] * 2, inliers=[step + 2, step + 2],
+                ratio=[0.5, 0.5], step=[step, 2 * step], confidence=[P.candidate_confidence + 10] * 2)
+    assert tiers(c, P).tolist() == ["auto", "candidate"]
+
 def test_views_measured_closer_than_one_node_step_are_one_place_though_they_share_less():
     # A revisit half a step away, in other light and with other people about, can share
     # fewer inliers than a step made a second apart; its measured distance says one place.
