@@ -60,6 +60,7 @@ def test_a_revisit_in_a_bare_corridor_is_found_when_its_views_share_what_a_step_
                 ratio=[0.5, 0.5], step=[step, 2 * step], confidence=[P.candidate_confidence + 10] * 2)
     assert tiers(c, P).tolist() == ["auto", "candidate"]
 
+
 def test_views_measured_closer_than_one_node_step_are_one_place_though_they_share_less():
     # A revisit half a step away, in other light and with other people about, can share
     # fewer inliers than a step made a second apart; its measured distance says one place.
