@@ -216,19 +216,6 @@ def test_a_pair_under_the_review_score_the_solved_map_closes_becomes_automatic()
     assert out[2] == ""
 
 
-def test_a_crossing_whose_views_share_half_a_step_is_closed_by_the_map():
-    """Two paths crossing at one spot see the place from two sides: the views share about half
-    of what a step along either path shares, and cannot measure their distance. Where the map
-    puts the ends together, that is enough."""
-    from engine.loops.verified import consistent
-
-    m = 81
-    c = matches([0, 4], [40, 44], score=[6.0, 3.2], inliers=[60, 20], step=[40, 40], yaw=[0.0, 0.0])
-    status = np.array(["auto", "candidate"], dtype=object)
-    out, _, closure, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
-    assert out[1] == "auto" and rule[1] == "the map closes it" and closure[1] <= P.auto_distance_steps
-
-
 def test_the_map_does_not_close_a_candidate_whose_views_share_too_little():
     from engine.loops.verified import consistent
 

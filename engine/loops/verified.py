@@ -91,7 +91,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     candidate with the reason. The solved map is a measurement too (docs/method.md, stage 7):
     a pair not automatic (a candidate, or one stage 5 dropped for its descriptor score) whose
     ends it joins and puts within ``auto_distance_steps``, whose views share
-    ``map_closes_share`` of a step's inliers but could not measure their distance, becomes
+    ``auto_measured_share`` of a step's inliers but could not measure their distance, becomes
     automatic (rule "the map closes it") and the graph is solved again with it. A candidate
     the map puts further apart than ``closure_slack`` + ``closure_rate`` per step of the
     graph between its ends is dropped. ``closure``: the ends' distance in the solved map,
@@ -117,7 +117,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     cand = np.flatnonzero(status != Status.AUTO.value)   # candidates and the pairs stage 5 dropped
     if pairs.inliers is None or pairs.step_inliers is None:   # not measured: nothing to share
         cand = cand[:0]
-    shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.map_closes_share * pairs.step_inliers[cand]) \
+    shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.auto_measured_share * pairs.step_inliers[cand]) \
         if cand.size else np.zeros(0, bool)
     unmeasured = ~np.isfinite(pairs.distance_steps[cand]) if pairs.distance_steps is not None else np.ones(cand.size, bool)
     closes = cand[shared & unmeasured & (closure[cand] <= params.auto_distance_steps)]
