@@ -24,8 +24,9 @@ unless asked), atomically (``engine.outputs.write_atomically``).
   (``engine.loops.pose_graph.step_factors``: the two-view step, or the direction
   carried on where a step had none), then every loop arc the corrected map holds (auto,
   confirmed, manual; candidates and rejected ones with ``keep_candidates`` /
-  ``keep_rejected``) as the pose graph's loop factor: no translation (sigma
-  ``loop_sigma_steps``) and the loop's ``yaw`` (sigma ``loop_turn_sigma_deg``; a loop
+  ``keep_rejected``) as the pose graph's loop factor: the measured offset (``distance_steps``
+  along ``bearing``; none where the views did not measure it; sigma ``loop_sigma_steps``) and
+  the loop's ``yaw`` (sigma ``loop_turn_sigma_deg``; a loop
   without yaw has an information of 1e-6 on the turn). A map whose steps are not in memory
   (read from a file) gives each step the relative pose of the estimated poses with the
   ``step_sigma_steps`` / ``step_turn_sigma_deg`` sigmas. Needs estimated poses (graph
@@ -103,6 +104,27 @@ def _wrap(theta: float) -> float:
     return (theta + math.pi) % (2 * math.pi) - math.pi
 
 
+def _step_unit(g, pose, steps) -> float:
+    """Length of one node step in the poses' units: 1, or with metric factors (graph
+    ``metric``) the median step in metres, as the pose graph scaled it."""
+    import numpy as np
+
+    if not g.graph.get("metric"):
+        return 1.0
+    length = np.hypot(steps[0], steps[1]) if steps is not None else np.linalg.norm(np.diff(pose[:, :2], axis=0), axis=1)
+    return float(np.median(length[length > 0])) if (length > 0).any() else 1.0
+
+
+def _loop_offset(d: dict, unit: float) -> tuple[float, float]:
+    """A loop's measured offset in the lower node's frame: ``distance_steps`` along ``bearing``
+    (0, 0 where the views did not measure it), as the pose graph's loop factor has it."""
+    dist, bearing = d.get("distance_steps"), d.get("bearing")
+    if dist is None or bearing is None or not (math.isfinite(float(dist)) and math.isfinite(float(bearing))):
+        return 0.0, 0.0
+    rad = math.radians(float(bearing))
+    return float(dist) * unit * math.cos(rad), float(dist) * unit * math.sin(rad)
+
+
 def g2o_text(topomap, keep_rejected: bool = False, keep_candidates: bool = False) -> str:
     """The map's pose graph in g2o's 2-D format (module notes)."""
     import numpy as np
@@ -144,6 +166,7 @@ def g2o_text(topomap, keep_rejected: bool = False, keep_candidates: bool = False
         lines.append(f"EDGE_SE2 {i} {j} {dx:.9g} {dy:.9g} {_wrap(dt):.9g} " + " ".join(f"{v:.9g}" for v in info))
     loop_sigma = param("loop_sigma_steps")
     turn_sigma = math.radians(param("loop_turn_sigma_deg"))
+    unit = _step_unit(g, pose, steps)
     loops = sorted((min(idx[u], idx[v]), max(idx[u], idx[v]), d) for u, v, d in g.edges(data=True)
                    if d.get("kind") == "loop")
     for i, j, d in loops:   # yaw: the heading of the higher index relative to the lower one
@@ -151,7 +174,8 @@ def g2o_text(topomap, keep_rejected: bool = False, keep_candidates: bool = False
         known = yaw is not None and math.isfinite(float(yaw))
         turn = math.radians(float(yaw)) if known else 0.0
         info = _information(loop_sigma, loop_sigma, turn_sigma if known else float("inf"))
-        lines.append(f"EDGE_SE2 {i} {j} 0 0 {_wrap(turn):.9g} " + " ".join(f"{v:.9g}" for v in info))
+        ox, oy = _loop_offset(d, unit)
+        lines.append(f"EDGE_SE2 {i} {j} {ox:.9g} {oy:.9g} {_wrap(turn):.9g} " + " ".join(f"{v:.9g}" for v in info))
     return "\n".join(lines) + "\n"
 
 

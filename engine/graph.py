@@ -25,7 +25,10 @@ GraphML contract (DESIGN.md), one attribute = one type everywhere:
   ranking of the review queue), ``closure`` float (node steps by which the dead-reckoned
   path between the two ends misses meeting again), ``plane_share`` float (share of the
   inliers whose triangulated points lie on one plane), ``distance_steps`` float (how far
-  apart the two views are, in node steps, from the geometry scaled by each end's own steps).
+  apart the two views are, in node steps, from the geometry scaled by each end's own steps),
+  ``bearing`` float (where it has a ``distance_steps``: the direction of the later node seen
+  from the earlier one, degrees anticlockwise from the earlier node's heading; the pose graph's
+  loop factor puts it there).
 
 Curation ("decisions") is keyed by source frame numbers, not node ids, so a user's
 confirmed/rejected/manual loops and labels survive a re-run with other parameters.
@@ -67,9 +70,10 @@ _EDGE_TYPES = {"kind": str, "similarity": float, "status": str, "yaw": float,
                "window_count": int, "tier": str, "score": float, "support": float,
                "direction": int, "matches": int, "inliers": int, "inlier_ratio": float,
                "path_inliers": int, "confidence": float, "closure": float, "step_inliers": int,
-               "plane_share": float, "distance_steps": float, "rule": str, "reason": str}
+               "plane_share": float, "distance_steps": float, "bearing": float, "rule": str, "reason": str}
 EVIDENCE_KEYS = ("score", "support", "direction", "matches", "inliers", "inlier_ratio", "path_inliers",
-                 "step_inliers", "confidence", "closure", "plane_share", "distance_steps", "rule", "reason")
+                 "step_inliers", "confidence", "closure", "plane_share", "distance_steps", "bearing", "rule",
+                 "reason")
 # Graph attributes: every map parameter with its declared type (bools stored as 0/1).
 _GRAPH_TYPES = {"generator": str, "source": str, "descriptor": str, "interval": float, "positions": str,
                 "sessions": str, "decisions": str,

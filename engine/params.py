@@ -142,6 +142,18 @@ PARAMETERS: tuple[Parameter, ...] = (
               "their measured distance share 0.70-2.4 of a step's inliers (5th percentile "
               "0.83); 0.6 lies under all of them. Seventh round; the distances fitted to a "
               "repeated texture that the second family showed shared 0.33-0.54", 0.0, 100.0),
+    Parameter("map_closes_share", float, 0.45, _NEW,
+              "a pair the solved map closes (stage 7, rule 'the map closes it': its views "
+              "could not measure their distance, the map puts them within auto_distance_steps) "
+              "shares at least this share of the inliers each end shares with its next node",
+              "first synthetic family's day pairs (seeds 0-4, round 33): a crossing's two views "
+              "see the place from two sides and share 0.47-0.56 of a step (outdoors and "
+              "indoors, 5 places the map put 0.05-1.08 steps apart); the places found and "
+              "loops beyond 2 m are the same for any value in 0.3-0.45 (0.5 loses one), and "
+              "0.45 is the largest of them. Was auto_measured_share (0.6), a bound for two "
+              "views' own distance; here the map measures it (docs/method.md, stage 7). Only "
+              "with loop factors that carry their measured offset: with none, the held-out "
+              "second family's three-day offset return got a loop 2.04 m apart at 0.46", 0.0, 100.0),
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",

@@ -55,6 +55,11 @@ def test_the_g2o_file_holds_the_estimated_poses_the_steps_and_the_kept_loops(map
         assert x == pytest.approx(d["x"], abs=1e-6) and y == pytest.approx(d["y"], abs=1e-6)
         assert abs(_wrap(th - math.radians(d["heading"]))) < 1e-6
     pairs = {(i, j) for i, j, _, _ in edges}
+    apart = {}   # the two views' measured distance of each loop, None where not measured
+    for u, v, d in g.edges(data=True):
+        if d.get("kind") == "loop":
+            i, j = sorted((g.nodes[u]["index"], g.nodes[v]["index"]))
+            apart[(i, j)] = d.get("distance_steps")
     kept = topomap.loops(("auto", "confirmed", "manual"))
     assert kept, "the drive back closes loops"
     expected = {(k, k + 1) for k in range(topomap.node_count - 1)}
@@ -63,8 +68,8 @@ def test_the_g2o_file_holds_the_estimated_poses_the_steps_and_the_kept_loops(map
     for i, j, (dx, dy, dt), info in edges:
         m = np.array([[info[0], info[1], info[2]], [info[1], info[3], info[4]], [info[2], info[4], info[5]]])
         assert np.all(np.linalg.eigvalsh(m) > 0)          # an information matrix
-        if j - i > 1:                                       # a loop: one place, no translation
-            assert dx == 0 and dy == 0
+        if (i, j) in apart:   # a loop: b where the two views measured it, on a where they did not
+            assert math.hypot(dx, dy) == pytest.approx(apart[(i, j)] or 0.0, abs=1e-6)
     # the solution agrees with its steps: the estimated poses of consecutive nodes (where no
     # loop bends the path) are about one measured step apart
     steps = [math.hypot(dx, dy) for i, j, (dx, dy, _), _ in edges if j == i + 1]

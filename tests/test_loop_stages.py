@@ -216,6 +216,38 @@ def test_a_pair_under_the_review_score_the_solved_map_closes_becomes_automatic()
     assert out[2] == ""
 
 
+def test_a_crossing_whose_views_share_half_a_step_is_closed_by_the_map():
+    """Two paths crossing at one spot see the place from two sides: the views share about half
+    of what a step along either path shares, and cannot measure their distance. Where the map
+    puts the ends together, that is enough."""
+    from engine.loops.verified import consistent
+
+    m = 81
+    c = matches([0, 4], [40, 44], score=[6.0, 3.2], inliers=[60, 20], step=[40, 40], yaw=[0.0, 0.0])
+    status = np.array(["auto", "candidate"], dtype=object)
+    out, _, closure, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert out[1] == "auto" and rule[1] == "the map closes it" and closure[1] <= P.auto_distance_steps
+
+
+def test_the_map_keeps_a_loop_where_the_two_views_measured_it():
+    """A return driven a step beside the first pass: the automatic loop's views measured b one
+    step to the left of a. The map keeps the second lap a step beside the first, so a pair
+    further along the two laps is a step apart in it, not on top of each other (a loop factor
+    of no translation would pull the laps onto one line)."""
+    from engine.loops.verified import consistent
+
+    m = 81
+    # the second pair shares too little to be closed itself: only the map's reading of it is asked
+    c = matches([0, 4], [40, 44], score=[6.0, 3.2], inliers=[60, 5], step=[40, 40], yaw=[0.0, 0.0])
+    c.distance_steps = np.array([1.0, np.nan])
+    c.bearing = np.array([90.0, np.nan])
+    status = np.array(["auto", ""], dtype=object)
+    beside = consistent(c, status, _Steps(m), P, m, (0,))[2][1]
+    c.distance_steps[0] = np.nan                       # the same loop, its distance unmeasured
+    on_top = consistent(c, status, _Steps(m), P, m, (0,))[2][1]
+    assert on_top < 0.3 and 0.7 < beside < 1.3
+
+
 def test_the_map_does_not_close_a_candidate_whose_views_share_too_little():
     from engine.loops.verified import consistent
 

@@ -118,7 +118,7 @@ class PairGeometry:
         n = len(pairs)
         for name, fill in (("matches", -1), ("inliers", -1), ("path_inliers", -1), ("step_inliers", -1)):
             setattr(pairs, name, np.full(n, fill, np.int64))
-        for name in ("inlier_ratio", "yaw", "plane_share", "distance_steps"):
+        for name in ("inlier_ratio", "yaw", "plane_share", "distance_steps", "bearing"):
             setattr(pairs, name, np.full(n, np.nan))
         if self.known and n:
             a, b = pairs.a, pairs.b
@@ -126,6 +126,8 @@ class PairGeometry:
             pairs.matches, pairs.inliers = fit[:, MATCHES].astype(np.int64), fit[:, INLIERS].astype(np.int64)
             pairs.inlier_ratio, pairs.plane_share = fit[:, RATIO], fit[:, PLANE]
             pairs.yaw = original_yaw(fit[:, YAW], self.shifts[a], self.shifts[b], self.frame_width)
+            pairs.bearing = wrap_degrees(fit[:, MOTION] - (self.shifts[a] * 360.0 / self.frame_width
+                                                           if self.frame_width > 0 else 0.0))
             gap = params.neighbor_node_num + 1
             pairs.path_inliers = np.maximum(self.neighbour_inliers(a, gap, partners=b),
                                             self.neighbour_inliers(b, gap, partners=a))

@@ -41,6 +41,7 @@ class Pairs:
     step_inliers: Optional[np.ndarray] = None   # each end with its next node (the smaller end)
     plane_share: Optional[np.ndarray] = None    # share of inliers on one plane (NaN unknown)
     distance_steps: Optional[np.ndarray] = None  # the two views apart, in node steps (NaN unknown)
+    bearing: Optional[np.ndarray] = None        # direction of b seen from a, degrees in a's frame (NaN unknown)
 
     def __len__(self) -> int:
         return int(self.a.size)

@@ -2,8 +2,11 @@
 
 Every node has a planar pose (x, y in node steps, heading). Consecutive nodes are joined by
 step factors from their two-view fit (``geometry.Steps``: the turn, the direction of motion,
-one node step long, each with its uncertainty); loops by loop factors (the two views are one
-place: no translation beyond ``loop_sigma_steps``, the two-view yaw). The loops are robust:
+one node step long, each with its uncertainty); loops by loop factors (b where the two views
+measured it: the measured distance along the two-view direction, or on a where the views did
+not measure a distance; within ``loop_sigma_steps``; the two-view yaw). A loop factor of no
+translation between views a metre apart would pull a route and its return beside it onto one
+line, and the solved map would then put their other nodes together too. The loops are robust:
 GTSAM's ``GncLMOptimizer`` with a truncated least-squares cost rejects the loops the path and
 the other loops cannot hold (as Kimera-RPGO does). A step that turns more than a quarter turn
 is ``ambiguous`` (a corridor alike both ways reads a straight step as a half turn): its
@@ -45,11 +48,13 @@ _RELATIVE_TOL = 1e-3
 
 @dataclass
 class Loops:
-    """Loop factors: node pairs with the relative heading of b to a (degrees, NaN unknown)."""
+    """Loop factors: node pairs with the relative heading of b to a (degrees, NaN unknown) and
+    where b lies in a's frame (node steps; None or NaN: on a)."""
 
     a: np.ndarray
     b: np.ndarray
     yaw: np.ndarray
+    offset: Optional[np.ndarray] = None   # (n, 2) b's position in a's frame, node steps (None: 0)
 
 
 @dataclass
@@ -149,11 +154,12 @@ def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
                                      gtsam.noiseModel.Gaussian.Covariance(cov + 1e-9 * np.eye(3))), True)
     loop_factors = []
     loop_sigma = params.loop_sigma_steps * f.unit
-    for a, b, yaw in zip(loops.a.tolist(), loops.b.tolist(), loops.yaw.tolist()):
+    offset = np.zeros((loops.a.size, 2)) if loops.offset is None else np.nan_to_num(loops.offset) * f.unit
+    for (a, b, yaw), (ox, oy) in zip(zip(loops.a.tolist(), loops.b.tolist(), loops.yaw.tolist()), offset.tolist()):
         turn = np.radians(yaw) if np.isfinite(yaw) else 0.0
         st_loop = np.radians(params.loop_turn_sigma_deg) if np.isfinite(yaw) else _FREE_TURN
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([loop_sigma, loop_sigma, st_loop]))
-        loop_factors.append(add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(0.0, 0.0, turn), noise), False))
+        loop_factors.append(add(gtsam.BetweenFactorPose2(int(a), int(b), gtsam.Pose2(ox, oy, turn), noise), False))
     for k, xy, sigma in (metric_factors.positions(metric, keys, params) if metric is not None else ()):
         add(gtsam.PoseTranslationPrior2D(k, xy, gtsam.noiseModel.Isotropic.Sigma(2, sigma)), True)   # heading free
 

@@ -91,7 +91,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     candidate with the reason. The solved map is a measurement too (docs/method.md, stage 7):
     a pair not automatic (a candidate, or one stage 5 dropped for its descriptor score) whose
     ends it joins and puts within ``auto_distance_steps``, whose views share
-    ``auto_measured_share`` of a step's inliers but could not measure their distance, becomes
+    ``map_closes_share`` of a step's inliers but could not measure their distance, becomes
     automatic (rule "the map closes it") and the graph is solved again with it. A candidate
     the map puts further apart than ``closure_slack`` + ``closure_rate`` per step of the
     graph between its ends is dropped. ``closure``: the ends' distance in the solved map,
@@ -107,7 +107,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
 
     def solve():
         auto = np.flatnonzero(status == Status.AUTO.value)
-        loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto])
+        loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto], _offsets(pairs, auto))
         solution = pose_graph.solve(m, steps, loops, params, chain_starts,
                                     extra_keys=np.concatenate([pairs.a, pairs.b]), metric=metric)
         xy = solution.poses[:, :2]
@@ -117,7 +117,7 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     cand = np.flatnonzero(status != Status.AUTO.value)   # candidates and the pairs stage 5 dropped
     if pairs.inliers is None or pairs.step_inliers is None:   # not measured: nothing to share
         cand = cand[:0]
-    shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.auto_measured_share * pairs.step_inliers[cand]) \
+    shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.map_closes_share * pairs.step_inliers[cand]) \
         if cand.size else np.zeros(0, bool)
     unmeasured = ~np.isfinite(pairs.distance_steps[cand]) if pairs.distance_steps is not None else np.ones(cand.size, bool)
     closes = cand[shared & unmeasured & (closure[cand] <= params.auto_distance_steps)]
@@ -137,6 +137,16 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
     return status, reason, closure, solution.poses, rule
 
 
+def _offsets(pairs: Pairs, rows: np.ndarray) -> Optional[np.ndarray]:
+    """Where each loop's b lies in a's frame (node steps): its measured distance along the
+    two-view direction of b seen from a (``bearing``); 0 where either is unknown."""
+    if pairs.distance_steps is None or pairs.bearing is None:
+        return None
+    d, az = pairs.distance_steps[rows], np.radians(pairs.bearing[rows])
+    ok = np.isfinite(d) & np.isfinite(az)
+    return np.where(ok[:, None], np.stack([d * np.cos(az), d * np.sin(az)], axis=1), 0.0)
+
+
 def _evidence(pairs: Pairs, i: int, rule: str, reason: str, closure: float) -> dict:
     known = pairs.inliers[i] >= 0   # two-view geometry was measured
 
@@ -152,4 +162,5 @@ def _evidence(pairs: Pairs, i: int, rule: str, reason: str, closure: float) -> d
             "path_inliers": fit("path_inliers"), "step_inliers": fit("step_inliers"),
             "confidence": float(pairs.confidence[i]), "closure": float(closure) if np.isfinite(closure) else None,
             "plane_share": value("plane_share"), "distance_steps": value("distance_steps"),
+            "bearing": value("bearing") if np.isfinite(pairs.distance_steps[i]) else None,
             "rule": str(rule) or None, "reason": str(reason) or None}
