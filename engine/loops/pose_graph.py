@@ -73,10 +73,11 @@ def step_factors(steps: Steps, chain_starts: Sequence[int], params: MapParams,
     """The step factors (also the g2o export's): each step's turn and direction of motion, one
     node step long (none where the camera stood still). A step without a direction of motion
     keeps the direction of the step before it (a robot keeps moving the way it moved) with a
-    step's worth of uncertainty. With ``metric``: in metres (``metric_factors.in_metres``)."""
+    step's worth of uncertainty. With ``metric``: in metres (``metric_factors.in_metres``).
+    A step read moving backwards (``backwards``) has no direction of motion either."""
     starts = np.unique(np.concatenate([[0], np.asarray(chain_starts, np.int64)]))
     n = steps.yaw.size
-    motion = steps.motion.copy()
+    motion = np.where(backwards(steps, starts), np.nan, steps.motion)
     known = np.isfinite(motion)
     idx = np.arange(n)
     into_new = np.zeros(n, bool)
@@ -94,6 +95,42 @@ def step_factors(steps: Steps, chain_starts: Sequence[int], params: MapParams,
         f = metric_factors.in_metres(f, metric, starts, params)
     f.ambiguous[starts[starts > 0] - 1] = False                  # no factor between chains
     return f
+
+
+def backwards(steps: Steps, chain_starts: Sequence[int]) -> np.ndarray:
+    """(n,) bool: the steps whose direction of motion points back against the way the
+    camera was moving (more than a quarter turn from the last step that moved, in the world,
+    by the turns measured between them), while the camera did not turn a quarter turn.
+
+    Two views give the direction of motion up to its sign, and cheirality (points in front of
+    both cameras) picks the sign: in a dim scene of far points either sign fits. The
+    over-exposed third day of the first family's loop route read three steps in a row
+    backwards (180 degrees, no turn); the step factors, sure of them, folded the path, and the
+    map then closed two places 3.9 m apart (docs/history.md, round 34). Such a step keeps the
+    direction before it with a step's worth of uncertainty, like a step with no reading. A
+    camera that really backs up is then mapped as uncertain there, not folded with
+    confidence. A still, ambiguous or unknown-turn step is skipped and ends the comparison
+    (the heading across it is not known well)."""
+    n = steps.yaw.size
+    out = np.zeros(n, bool)
+    new_chain = np.zeros(n + 1, bool)
+    new_chain[np.asarray(chain_starts, np.int64)] = True
+    heading, last = 0.0, None   # node i's heading by the turns since the last reset; the last direction moved
+    for i in range(n):
+        if new_chain[i]:
+            heading, last = 0.0, None
+        yaw = steps.yaw[i]
+        if steps.still[i] or steps.ambiguous[i] or not np.isfinite(yaw):
+            heading, last = 0.0, None
+            continue
+        if np.isfinite(steps.motion[i]):
+            direction = heading + steps.motion[i]
+            if last is not None and abs((direction - last + 180.0) % 360.0 - 180.0) > 90.0:
+                out[i] = True
+            else:
+                last = direction
+        heading += yaw
+    return out
 
 
 def solve(m: int, steps: Steps, loops: Loops, params: MapParams,
