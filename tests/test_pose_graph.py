@@ -3,7 +3,7 @@
 import numpy as np
 
 from engine.loops.pairs import Steps
-from engine.loops.pose_graph import Loops, solve
+from engine.loops.pose_graph import Loops, backwards, solve
 from engine.params import MapParams
 
 SIDE = 10   # node steps per side of the square
@@ -74,6 +74,23 @@ def test_a_true_half_turn_stands_where_no_loop_disagrees():
     assert sol.outvoted_steps.size == 0
     # ...and drives back over where it came from: node 7 is where node 5 was
     assert np.linalg.norm(sol.poses[7, :2] - sol.poses[5, :2]) < 0.5
+
+
+def test_steps_read_backwards_on_a_straight_side_do_not_fold_the_path_back():
+    """Two views fix the direction of motion only up to its sign; a run of steps read
+    backwards mid-side must not put the side's far end back beside its middle."""
+    m, steps = _square(laps=1)
+    steps.motion[4:7] = 180.0                               # three steps read backwards, no turn
+    sol = solve(m, steps, Loops(np.zeros(0, int), np.zeros(0, int), np.zeros(0)), MapParams())
+    along = np.linalg.norm(sol.poses[SIDE - 1, :2] - sol.poses[3, :2])
+    assert along > 0.7 * (SIDE - 4)                          # folded, it would be SIDE - 4 - 6
+
+
+def test_a_turn_read_in_steps_is_not_taken_for_backwards_motion():
+    m, steps = _square(laps=1)
+    steps.yaw[:] = 20.0                                     # a steady left curve...
+    steps.motion[:] = 10.0                                  # ...moving along its chord
+    assert not backwards(steps, [0]).any()
 
 
 def test_two_recordings_are_two_chains_joined_only_by_loops():
