@@ -39,6 +39,9 @@ if TYPE_CHECKING:
 # A turn or position this uncertain says nothing (a weak factor): the chain stays joined.
 _FREE_TURN = 1e3
 _FREE_STEP = 1e3
+# A direction of motion this far from the way the camera moved reads backwards: halfway
+# between the two signs two views leave open (0 and 180 degrees), not a tuned number.
+_BACKWARDS_DEG = 90.0
 # Solver effort per graduated step: each starts from the last solution, which is close, so a
 # looser tolerance and fewer iterations than GTSAM's defaults (1e-5, 100) suffice; with the
 # defaults Levenberg-Marquardt took 45 iterations per solve (20,000 nodes, 800 loops: 23 s).
@@ -125,7 +128,7 @@ def backwards(steps: Steps, chain_starts: Sequence[int]) -> np.ndarray:
             continue
         if np.isfinite(steps.motion[i]):
             direction = heading + steps.motion[i]
-            if last is not None and abs((direction - last + 180.0) % 360.0 - 180.0) > 90.0:
+            if last is not None and abs((direction - last + 180.0) % 360.0 - 180.0) > _BACKWARDS_DEG:
                 out[i] = True
             else:
                 last = direction
