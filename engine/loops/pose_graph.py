@@ -101,38 +101,31 @@ def step_factors(steps: Steps, chain_starts: Sequence[int], params: MapParams,
 
 
 def backwards(steps: Steps, chain_starts: Sequence[int]) -> np.ndarray:
-    """(n,) bool: the steps whose direction of motion points back against the way the
-    camera was moving (more than a quarter turn from the last step that moved, in the world,
-    by the turns measured between them), while the camera did not turn a quarter turn.
+    """(n,) bool: the steps whose direction of motion, in the camera's own frame, points more
+    than a quarter turn from the way its recording mostly moves (the mean direction of its
+    moving steps).
 
     Two views give the direction of motion up to its sign, and cheirality (points in front of
-    both cameras) picks the sign: in a dim scene of far points either sign fits. The
-    over-exposed third day of the first family's loop route read three steps in a row
-    backwards (180 degrees, no turn); the step factors, sure of them, folded the path, and the
-    map then closed two places 3.9 m apart (docs/history.md, round 34). Such a step keeps the
-    direction before it with a step's worth of uncertainty, like a step with no reading. A
-    camera that really backs up is then mapped as uncertain there, not folded with
-    confidence. A still, ambiguous or unknown-turn step is skipped and ends the comparison
-    (the heading across it is not known well)."""
+    both cameras) picks the sign: in a dim scene or a corridor of far points either sign
+    fits. A camera fixed to a vehicle moves the same way in its own frame all along (half the
+    turn off it in a turn), so a step read the other way is the sign misread, and a step
+    factor sure of it folds the path. The over-exposed third day of the first family's loop
+    route read three steps in a row backwards; the path folded and the map closed two places
+    3.9 m apart (docs/history.md, round 34). Such a step keeps the direction before it with a
+    step's worth of uncertainty, like a step with no reading. A vehicle that really backs up
+    is then mapped as uncertain there, not folded with confidence. Still and ambiguous steps
+    are left as they are."""
     n = steps.yaw.size
     out = np.zeros(n, bool)
-    new_chain = np.zeros(n + 1, bool)
-    new_chain[np.asarray(chain_starts, np.int64)] = True
-    heading, last = 0.0, None   # node i's heading by the turns since the last reset; the last direction moved
-    for i in range(n):
-        if new_chain[i]:
-            heading, last = 0.0, None
-        yaw = steps.yaw[i]
-        if steps.still[i] or steps.ambiguous[i] or not np.isfinite(yaw):
-            heading, last = 0.0, None
+    moving = np.isfinite(steps.motion) & ~np.asarray(steps.still, bool) & ~np.asarray(steps.ambiguous, bool)
+    bounds = np.unique(np.concatenate([[0], np.asarray(chain_starts, np.int64), [n + 1]]))
+    for first, end in zip(bounds[:-1], bounds[1:]):
+        rows = np.flatnonzero(moving[first:min(end - 1, n)]) + first   # the step into the next chain is unused
+        if rows.size == 0:
             continue
-        if np.isfinite(steps.motion[i]):
-            direction = heading + steps.motion[i]
-            if last is not None and abs((direction - last + 180.0) % 360.0 - 180.0) > _BACKWARDS_DEG:
-                out[i] = True
-            else:
-                last = direction
-        heading += yaw
+        usual = np.angle(np.exp(1j * np.radians(steps.motion[rows])).sum())
+        off = np.abs(np.angle(np.exp(1j * (np.radians(steps.motion[rows]) - usual))))
+        out[rows] = off > np.radians(_BACKWARDS_DEG)
     return out
 
 
