@@ -86,6 +86,20 @@ def test_steps_read_backwards_on_a_straight_side_do_not_fold_the_path_back():
     assert along > 0.7 * (SIDE - 4)                          # folded, it would be SIDE - 4 - 6
 
 
+def test_in_a_corridor_of_far_points_only_the_misread_steps_are_read_backwards():
+    m, steps = _square(laps=2)
+    steps.motion[[13, 14]] = np.nan                         # no reading, then...
+    flipped = [15, 18, 19, 23, 47, 60]                      # ...the first one after it misread
+    steps.motion[flipped] = 180.0
+    assert np.flatnonzero(backwards(steps, [0])).tolist() == flipped
+
+
+def test_a_camera_mounted_sideways_moves_sideways_and_is_not_read_backwards():
+    m, steps = _square(laps=1)
+    steps.motion[:] = 90.0                                  # the camera faces the vehicle's left
+    assert not backwards(steps, [0]).any()
+
+
 def test_a_turn_read_in_steps_is_not_taken_for_backwards_motion():
     m, steps = _square(laps=1)
     steps.yaw[:] = 20.0                                     # a steady left curve...
