@@ -100,6 +100,13 @@ def test_a_camera_mounted_sideways_moves_sideways_and_is_not_read_backwards():
     assert not backwards(steps, [0]).any()
 
 
+def test_a_camera_that_keeps_its_heading_round_a_square_is_not_read_backwards():
+    m, steps = _square(laps=1)
+    steps.yaw[:] = 0.0                                      # a gimbal, or a 360 camera's direction lock:
+    steps.motion[:] = 90.0 * (np.arange(steps.motion.size) // SIDE)   # it sees the vehicle move every way
+    assert not backwards(steps, [0]).any()
+
+
 def test_a_turn_read_in_steps_is_not_taken_for_backwards_motion():
     m, steps = _square(laps=1)
     steps.yaw[:] = 20.0                                     # a steady left curve...

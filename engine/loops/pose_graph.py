@@ -42,6 +42,12 @@ _FREE_STEP = 1e3
 # A direction of motion this far from the way the camera moved reads backwards: halfway
 # between the two signs two views leave open (0 and 180 degrees), not a tuned number.
 _BACKWARDS_DEG = 90.0
+# A recording has a usual direction of motion in its camera's frame when its steps' mean
+# direction vector is at least this long: 1 - 2p with a share p of steps read backwards and
+# the rest one way, so at most a quarter of them misread. A camera that keeps its heading
+# while the vehicle turns (a gimbal, a 360 camera's direction lock) moves every way in its
+# own frame over a route: near 0, and no step is judged by it.
+_USUAL_LENGTH = 0.5
 # Solver effort per graduated step: each starts from the last solution, which is close, so a
 # looser tolerance and fewer iterations than GTSAM's defaults (1e-5, 100) suffice; with the
 # defaults Levenberg-Marquardt took 45 iterations per solve (20,000 nodes, 800 loops: 23 s).
@@ -114,7 +120,7 @@ def backwards(steps: Steps, chain_starts: Sequence[int]) -> np.ndarray:
     3.9 m apart (docs/history.md, round 34). Such a step keeps the direction before it with a
     step's worth of uncertainty, like a step with no reading. A vehicle that really backs up
     is then mapped as uncertain there, not folded with confidence. Still and ambiguous steps
-    are left as they are."""
+    are left as they are, and so is a recording with no usual direction (``_USUAL_LENGTH``)."""
     n = steps.yaw.size
     out = np.zeros(n, bool)
     moving = np.isfinite(steps.motion) & ~np.asarray(steps.still, bool) & ~np.asarray(steps.ambiguous, bool)
@@ -123,8 +129,10 @@ def backwards(steps: Steps, chain_starts: Sequence[int]) -> np.ndarray:
         rows = np.flatnonzero(moving[first:min(end - 1, n)]) + first   # the step into the next chain is unused
         if rows.size == 0:
             continue
-        usual = np.angle(np.exp(1j * np.radians(steps.motion[rows])).sum())
-        off = np.abs(np.angle(np.exp(1j * (np.radians(steps.motion[rows]) - usual))))
+        mean = np.exp(1j * np.radians(steps.motion[rows])).mean()
+        if np.abs(mean) < _USUAL_LENGTH:   # no usual direction: a camera that keeps its heading
+            continue
+        off = np.abs(np.angle(np.exp(1j * np.radians(steps.motion[rows])) / mean))
         out[rows] = off > np.radians(_BACKWARDS_DEG)
     return out
 
