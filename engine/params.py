@@ -152,8 +152,10 @@ PARAMETERS: tuple[Parameter, ...] = (
               "loops beyond 2 m are the same for any value in 0.3-0.45 (0.5 loses one), and "
               "0.45 is the largest of them. Was auto_measured_share (0.6), a bound for two "
               "views' own distance; here the map measures it (docs/method.md, stage 7). Only "
-              "with loop factors that carry their measured offset: with none, the held-out "
-              "second family's three-day offset return got a loop 2.04 m apart at 0.46", 0.0, 100.0),
+              "with loop factors that carry their measured offset (with none, the held-out "
+              "second family's three-day offset return got a loop 2.04 m apart at 0.46), and with "
+              "steps read backwards left unknown (round 34: three of them folded a path and the "
+              "map closed two places 3.9 m apart)", 0.0, 100.0),
     Parameter("auto_plane_share", float, 0.6, _NEW,
               "an automatic loop's two-view inliers may lie on one plane at most this share "
               "(more: a flat picture copied elsewhere fits as well as the place; to the queue)",
