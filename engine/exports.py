@@ -109,10 +109,14 @@ def _step_unit(g, pose, steps) -> float:
     ``metric``) the median step in metres, as the pose graph scaled it."""
     import numpy as np
 
+    from .metric_factors import median_step
+
     if not g.graph.get("metric"):
         return 1.0
-    length = np.hypot(steps[0], steps[1]) if steps is not None else np.linalg.norm(np.diff(pose[:, :2], axis=0), axis=1)
-    return float(np.median(length[length > 0])) if (length > 0).any() else 1.0
+    if steps is not None:
+        return median_step(steps[0], steps[1])
+    moves = np.diff(pose[:, :2], axis=0)
+    return median_step(moves[:, 0], moves[:, 1])
 
 
 def _loop_offset(d: dict, unit: float) -> tuple[float, float]:

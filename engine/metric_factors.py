@@ -74,9 +74,14 @@ def in_metres(f: StepFactors, metric: Metric, chain_starts: np.ndarray, params: 
         out.sigma_xy[odo] = params.odom_sigma_rate * base
         out.sigma_t[odo] = np.radians(params.odom_turn_sigma_deg) * base
         out.ambiguous[odo] = False
-    length = np.hypot(out.dx, out.dy)
-    out.unit = float(np.median(length[length > 0])) if (length > 0).any() else 1.0
+    out.unit = median_step(out.dx, out.dy)
     return out
+
+
+def median_step(dx, dy) -> float:
+    """The length of one node step: the median of the steps that move (1 where none does)."""
+    length = np.hypot(dx, dy)
+    return float(np.median(length[length > 0])) if (length > 0).any() else 1.0
 
 
 def keys_and_start(metric: Metric, keys: np.ndarray, dr: np.ndarray, f: StepFactors, chain_starts: np.ndarray,
