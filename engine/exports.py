@@ -25,7 +25,8 @@ unless asked), atomically (``engine.outputs.write_atomically``).
   carried on where a step had none), then every loop arc the corrected map holds (auto,
   confirmed, manual; candidates and rejected ones with ``keep_candidates`` /
   ``keep_rejected``) as the pose graph's loop factor: the measured offset (``distance_steps``
-  along ``bearing``; none where the views did not measure it; sigma ``loop_sigma_steps``) and
+  along ``bearing``; none where the views did not measure it; sigma ``loop_sigma_steps``, both
+  times the step's length in a metric map, as the pose graph scales them) and
   the loop's ``yaw`` (sigma ``loop_turn_sigma_deg``; a loop
   without yaw has an information of 1e-6 on the turn). A map whose steps are not in memory
   (read from a file) gives each step the relative pose of the estimated poses with the
@@ -177,7 +178,7 @@ def g2o_text(topomap, keep_rejected: bool = False, keep_candidates: bool = False
         yaw = d.get("yaw")
         known = yaw is not None and math.isfinite(float(yaw))
         turn = math.radians(float(yaw)) if known else 0.0
-        info = _information(loop_sigma, loop_sigma, turn_sigma if known else float("inf"))
+        info = _information(loop_sigma * unit, loop_sigma * unit, turn_sigma if known else float("inf"))
         ox, oy = _loop_offset(d, unit)
         lines.append(f"EDGE_SE2 {i} {j} {ox:.9g} {oy:.9g} {_wrap(turn):.9g} " + " ".join(f"{v:.9g}" for v in info))
     return "\n".join(lines) + "\n"

@@ -8,7 +8,7 @@ import pytest
 from rendered_routes import described_route
 
 from engine.cli import main
-from engine.exports import write_map
+from engine.exports import g2o_text, write_map
 from engine.params import MapParams
 from engine.pipeline import build_map
 
@@ -30,8 +30,12 @@ def mapped(described, tmp_path_factory):
 
 
 def _parse(path):
+    return _parse_text(path.read_text())
+
+
+def _parse_text(text):
     vertices, edges = {}, []
-    for line in path.read_text().splitlines():
+    for line in text.splitlines():
         tag, *rest = line.split()
         if tag == "VERTEX_SE2":
             vertices[int(rest[0])] = tuple(map(float, rest[1:4]))
@@ -111,3 +115,26 @@ def test_a_recording_shorter_than_the_temporal_window_still_gets_its_path_poses(
     x, y = topomap.positions(estimated=True)
     gaps = np.hypot(np.diff(x), np.diff(y))
     assert np.all(gaps < 1.5) and np.median(gaps) > 0.5
+
+
+def test_a_metric_map_weighs_its_loops_against_its_steps_as_the_image_only_map_does(described):
+    """With odometry the pose graph is in metres and its loop sigma is ``loop_sigma_steps``
+    node steps long in metres; the g2o file must say the same, or a reader's solver would trust
+    the loops far more than panotopo's did."""
+    from engine.metric import Metric
+    from engine.synth2.recording import poses_for
+
+    descs = described[0]
+    truth = poses_for("reverse")
+    odometry = np.stack([truth.x, truth.y, truth.yaw], axis=1)[: len(descs)]
+    params = MapParams(neighbor_node_num=5)
+    topomap = build_map(descs, params, metric=Metric(odometry=odometry))
+    vertices, edges = _parse_text(g2o_text(topomap))
+    steps = [math.hypot(dx, dy) for i, j, (dx, dy, _), _ in edges if j == i + 1]
+    loops = [info for i, j, _, info in edges if j != i + 1]
+    assert loops, "the drive back closes loops"
+    step_length = float(np.median(steps))
+    assert 0.3 < step_length < 3.0          # metres: frames 0.8 m apart
+    for info in loops:
+        sigma_in_steps = 1.0 / math.sqrt(info[0]) / step_length
+        assert sigma_in_steps == pytest.approx(params.loop_sigma_steps, rel=0.05)
