@@ -28,7 +28,9 @@ unless asked), atomically (``engine.outputs.write_atomically``).
   along ``bearing``; none where the views did not measure it; sigma ``loop_sigma_steps``, both
   times the step's length in a metric map, as the pose graph scales them) and
   the loop's ``yaw`` (sigma ``loop_turn_sigma_deg``; a loop
-  without yaw has an information of 1e-6 on the turn). A map whose steps are not in memory
+  without yaw has an information of 1e-6 on the turn). The pairs the pose graph also used
+  because their views measured their offset, but which are not loops (``verified._measured_apart``),
+  are not in the map and not in the file. A map whose steps are not in memory
   (read from a file) gives each step the relative pose of the estimated poses with the
   ``step_sigma_steps`` / ``step_turn_sigma_deg`` sigmas. Needs estimated poses (graph
   ``positions`` "estimated", method verified with local features): otherwise one line.

@@ -144,7 +144,7 @@ PARAMETERS: tuple[Parameter, ...] = (
               "repeated texture that the second family showed shared 0.33-0.54", 0.0, 100.0),
     Parameter("map_closes_share", float, 0.45, _NEW,
               "a pair the solved map closes (stage 7, rule 'the map closes it': its views "
-              "could not measure their distance, the map puts them within auto_distance_steps) "
+              "did not measure them further apart, the map puts them within auto_distance_steps) "
               "shares at least this share of the inliers each end shares with its next node",
               "first synthetic family's day pairs (seeds 0-4, round 33): a crossing's two views "
               "see the place from two sides and share 0.47-0.56 of a step (outdoors and "

@@ -278,3 +278,55 @@ def test_a_distance_the_two_views_measured_outranks_the_map():
     status = np.array(["auto", "candidate"], dtype=object)
     out, _, _, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
     assert out[1] != "auto" and rule[1] == ""
+
+
+def test_the_map_closes_a_pair_its_views_measure_close_and_not_one_they_measure_apart():
+    """Two measurements of one pair: the views' and the map's. Where both say one place the
+    pair is closed, whatever its descriptor score (a place seen under another light); where the
+    views measured the ends further apart than the map does, the views' own distance stands."""
+    from engine.loops.verified import consistent
+
+    m = 81
+    low = P.candidate_z - 0.5
+    c = matches([0, 4, 8], [40, 44, 48], score=[6.0, low, low], inliers=[60, 35, 35], step=[40, 40, 40],
+                yaw=[0.0, 0.0, 0.0])
+    c.distance_steps = np.array([np.nan, 0.5 * P.auto_distance_steps, 4.0 * P.auto_distance_steps])
+    c.bearing = np.array([np.nan, 0.0, 0.0])
+    status = np.array(["auto", "", ""], dtype=object)
+    out, _, closure, _, rule = consistent(c, status, _Steps(m), P, m, (0,))
+    assert closure[2] <= P.auto_distance_steps   # the map outvotes the far reading, and would close it
+    assert out[1] == "auto" and rule[1] == "the map closes it"
+    assert out[2] != "auto" and rule[2] == ""
+
+
+class _TwoStraightDrives:
+    """Two recordings (nodes 0-20 and 21-41), each 20 straight steps."""
+
+    def steps(self, params):
+        from engine.loops.pairs import Steps
+
+        n = 41
+        return Steps(yaw=np.zeros(n), motion=np.zeros(n), still=np.zeros(n, bool), ambiguous=np.zeros(n, bool))
+
+
+def test_pairs_measured_apart_keep_the_map_from_joining_two_legs_beside_each_other():
+    """Two drives leave one spot (an automatic loop with no turn measured) and part, the second
+    turned 11 degrees: ten steps on, their views measured them two steps apart. That pair is no
+    loop, but it is a measurement of the map: a pair further on, whose views share a step's
+    points but could not measure their distance, is three steps apart, and the map must not
+    close it as one place."""
+    from engine.loops.verified import consistent
+
+    m, starts = 42, (0, 21)
+    turn = np.radians(11.3)
+    ahead = lambda k: k * np.array([np.cos(turn), np.sin(turn)]) - np.array([k, 0.0])   # noqa: E731
+    c = matches([0, 10, 15], [21, 31, 36], score=[6.0, 3.2, 3.2], inliers=[60, 60, 40], step=[40, 40, 40],
+                yaw=[np.nan, 11.3, 11.3])
+    apart = ahead(10)
+    c.distance_steps = np.array([np.nan, np.hypot(*apart), np.nan])
+    c.bearing = np.array([np.nan, np.degrees(np.arctan2(apart[1], apart[0])), np.nan])
+    status = np.array(["auto", "", "candidate"], dtype=object)
+    out, _, closure, _, rule = consistent(c, status, _TwoStraightDrives(), P, m, starts)
+    assert out[0] == "auto" and out[1] != "auto"
+    assert out[2] != "auto" and rule[2] == ""
+    assert closure[2] > 2.0                         # the two drives are 2.9 steps apart there

@@ -9,7 +9,8 @@ the next, and every number it reads is a ``MapParams`` entry (``engine.params.PA
 4. ``geometry.measure``      two-view geometry on the sphere, confidence     -> Pairs (measured)
 5. ``tiers.tiers``           auto / candidate / dropped by a table of rules  -> statuses
 6. ``tiers.nearest``         a pair not automatic moves to its place's closest views
-7. ``pose_graph.solve``      consistency: a robust pose graph of steps and automatic loops;
+7. ``pose_graph.solve``      consistency: a robust pose graph of steps, automatic loops and
+                             the other pairs whose views measured their offset;
                              the loops it rejects go to the queue with the reason, pairs it
                              closes join them, candidates it puts far apart are dropped
                                                                              -> LoopResult
@@ -87,11 +88,12 @@ def detect_loops(vectors: np.ndarray, params: MapParams, *, node_rows: np.ndarra
 def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params: MapParams, m: int,
                chain_starts, metric=None, rule: Optional[np.ndarray] = None) -> tuple:
     """Stage 7: (status, reason, closure, poses, rule). The automatic loops and the steps make
-    one robust pose graph (``pose_graph.solve``); an automatic loop it rejects becomes a
+    one robust pose graph (``pose_graph.solve``), shaped also by the other pairs whose views
+    measured their offset (``_measured_apart``); an automatic loop it rejects becomes a
     candidate with the reason. The solved map is a measurement too (docs/method.md, stage 7):
     a pair not automatic (a candidate, or one stage 5 dropped for its descriptor score) whose
     ends it joins and puts within ``auto_distance_steps``, whose views share
-    ``map_closes_share`` of a step's inliers but could not measure their distance, becomes
+    ``map_closes_share`` of a step's inliers and did not measure them further apart, becomes
     automatic (rule "the map closes it") and the graph is solved again with it. A candidate
     the map puts further apart than ``closure_slack`` + ``closure_rate`` per step of the
     graph between its ends is dropped. ``closure``: the ends' distance in the solved map,
@@ -107,9 +109,12 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
 
     def solve():
         auto = np.flatnonzero(status == Status.AUTO.value)
-        loops = pose_graph.Loops(pairs.a[auto], pairs.b[auto], pairs.yaw[auto], _offsets(pairs, auto))
+        seen = _measured_apart(pairs, status)
+        rows = np.concatenate([auto, seen])
+        loops = pose_graph.Loops(pairs.a[rows], pairs.b[rows], pairs.yaw[rows], _offsets(pairs, rows))
         solution = pose_graph.solve(m, steps, loops, params, chain_starts,
                                     extra_keys=np.concatenate([pairs.a, pairs.b]), metric=metric)
+        solution.kept = solution.kept[:auto.size]     # the loops; the other measurements only shape the map
         xy = solution.poses[:, :2]
         return auto, solution, np.linalg.norm(xy[pairs.b] - xy[pairs.a], axis=1) / solution.unit
 
@@ -119,8 +124,9 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
         cand = cand[:0]
     shared = (pairs.inliers[cand] > 0) & (pairs.inliers[cand] >= params.map_closes_share * pairs.step_inliers[cand]) \
         if cand.size else np.zeros(0, bool)
-    unmeasured = ~np.isfinite(pairs.distance_steps[cand]) if pairs.distance_steps is not None else np.ones(cand.size, bool)
-    closes = cand[shared & unmeasured & (closure[cand] <= params.auto_distance_steps)]
+    not_far = ~(pairs.distance_steps[cand] > params.auto_distance_steps) if pairs.distance_steps is not None \
+        else np.ones(cand.size, bool)
+    closes = cand[shared & not_far & (closure[cand] <= params.auto_distance_steps)]
     if closes.size:
         closes = closes[np.isfinite(solution.hops(pairs.a[closes], pairs.b[closes]))]
     if closes.size:
@@ -135,6 +141,20 @@ def consistent(pairs: Pairs, status: np.ndarray, geometry: PairGeometry, params:
         tolerance = params.closure_slack + params.closure_rate * solution.hops(pairs.a[cand], pairs.b[cand])
         status[cand[closure[cand] > tolerance]] = Status.DROPPED.value
     return status, reason, closure, solution.poses, rule
+
+
+def _measured_apart(pairs: Pairs, status: np.ndarray) -> np.ndarray:
+    """Rows of the pairs that are not automatic loops but whose two views measured where one
+    lies from the other (distance, direction and turn): a measurement of the map whether or
+    not the two are one place. A route and its return driven two metres beside it share many
+    points, and these pairs hold the two legs apart; without them nothing in the graph says
+    how far apart the legs are, the loops at the ends pull them together, and the map then
+    closes pairs two metres apart (docs/method.md, stage 7). Robust in the graph like a loop;
+    a wrong one is outvoted, and the map's loops are unchanged by it."""
+    if pairs.distance_steps is None or pairs.bearing is None or pairs.yaw is None:
+        return np.zeros(0, np.int64)
+    known = np.isfinite(pairs.distance_steps) & np.isfinite(pairs.bearing) & np.isfinite(pairs.yaw)
+    return np.flatnonzero(known & (status != Status.AUTO.value))
 
 
 def _offsets(pairs: Pairs, rows: np.ndarray) -> Optional[np.ndarray]:
